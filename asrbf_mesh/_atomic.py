@@ -52,6 +52,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise AsrbfError(f"{out}: cannot write here ({exc.strerror})") from None
     os.close(fd)
     tmp_path = Path(tmp)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp creates 0600; outputs get normal permissions
     try:
         yield tmp_path
         os.replace(tmp_path, out)

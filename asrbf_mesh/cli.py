@@ -1,0 +1,257 @@
+"""The ``asrbf`` command: fit, info, reconstruct, demo.
+
+Errors a user can cause print one line on stderr and exit with code 2; an
+unexpected bug exits with code 1 and a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+from typing import Any
+
+from . import __version__
+from .config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
+from .errors import AsrbfError
+from .frame import VIEW_AXES
+from .io import face_map_path, load_scan, save_mesh
+from .learn import fit
+from .network import FORMAT_VERSION, Network
+from .surface import reconstruct
+
+__all__ = ["main", "build_parser"]
+
+# FitConfig field -> (flag, type, help naming the paper's symbol)
+_LEARNING_OPTIONS: list[tuple[str, str, type, str]] = [
+    ("error_threshold", "--error-threshold", float, "E, local error threshold (criterion 2)"),
+    ("rms_threshold", "--rms-threshold", float, "E_omega, windowed RMS threshold (criterion 3)"),
+    ("d_max", "--d-max", float, "D_max, initial neuron separation (criterion 1)"),
+    ("d_min", "--d-min", float, "D_min, neuron separation level (default: 2 x scan spacing)"),
+    ("gamma", "--gamma", float, "gamma, decay factor of the separation distance, eq. (4)"),
+    ("psi", "--psi", float, "psi, overlap factor of new neuron widths, eq. (7)"),
+    ("window", "--window", int, "omega, RMS window (criterion 3) and pruning window"),
+    ("prune_threshold", "--prune-threshold", float, "P, pruning contribution threshold"),
+    ("prune_window", "--prune-window", int, "observations counted by pruning (default omega)"),
+    ("passes", "--passes", int, "replays of the data in random order"),
+    ("measurement_noise", "--measurement-noise", float, "R, EKF measurement noise variance"),
+    ("process_noise", "--process-noise", float, "q, EKF process noise (relative)"),
+    ("neighbourhood_factor", "--neighbourhood-factor", float,
+     "NEKF neighbourhood radius in units of the separation distance D"),
+    ("max_neighbours", "--max-neighbours", int, "cap on the NEKF neighbourhood size K'"),
+    ("gd_rate", "--gd-rate", float, "step size of --update gd"),
+    ("support", "--support", float, "Gaussian truncation radius in widths"),
+    ("max_neurons", "--max-neurons", int, "hard cap on the number of neurons K"),
+    ("polish_iterations", "--polish-iterations", int, "Levenberg-Marquardt iterations"),
+]
+_CHOICE_OPTIONS = [
+    ("update", "--update", UPDATES, "parameter updater"),
+    ("pruning", "--pruning", PRUNINGS, "pruning rule ('literal' is the paper's)"),
+    ("decay", "--decay", DECAYS, "index of eq. (4): observation count or neuron count"),
+    ("polish", "--polish", POLISHES, "batch stage after learning ('none' is the paper)"),
+]
+
+
+def _add_learning(p: argparse.ArgumentParser) -> None:
+    d = FitConfig()
+    g = p.add_argument_group("learning parameters (unit cube; paper section 5.1 defaults)")
+    for field, flag, typ, text in _LEARNING_OPTIONS:
+        g.add_argument(flag, dest=field, type=typ, default=None,
+                       help=f"{text} [default: {getattr(d, field)}]")
+    for field, flag, choices, text in _CHOICE_OPTIONS:
+        g.add_argument(flag, dest=field, choices=choices, default=None,
+                       help=f"{text} [default: {getattr(d, field)}]")
+    p.add_argument("--seed", type=int, default=0, help="random order seed [default: 0]")
+    p.add_argument("--view-axis", choices=VIEW_AXES, default="z",
+                   help="depth direction of the height field [default: z]")
+
+
+def _config(args: argparse.Namespace) -> FitConfig:
+    fields = [f for f, *_ in _LEARNING_OPTIONS] + [f for f, *_ in _CHOICE_OPTIONS]
+    changes = {f: getattr(args, f) for f in fields if getattr(args, f) is not None}
+    return FitConfig().replace(**changes)
+
+
+def _fit_summary(net: Network) -> dict[str, Any]:
+    info = net.info
+    n = int(info["n_points"])
+    return {
+        "n_points": n,
+        "n_neurons": net.n_neurons,
+        "ebar": info["ebar"],
+        "ebar_sequential": info["ebar_sequential"],
+        "n_to_k": net.compression_ratio(n),
+        "storage_ratio": net.storage_ratio(n),
+        "error_mean": info["error_mean"],
+        "error_std": info["error_std"],
+        "steps": info["steps"],
+        "fit_seconds": info["fit_seconds"],
+        "learn_seconds": info["learn_seconds"],
+        "polish_seconds": info["polish_seconds"],
+        "us_per_step": info["us_per_step"],
+        "d_min": info["d_min"],
+        "seed": info["seed"],
+        "polish": net.config.polish,
+        "added": net.log.added if net.log else None,
+        "pruned": net.log.pruned if net.log else None,
+    }
+
+
+def _print_summary(s: dict[str, Any], out=sys.stdout) -> None:
+    rows = [
+        ("points N", f"{s['n_points']:,}"),
+        ("neurons K", f"{s['n_neurons']:,}  (added {s['added']:,}, pruned {s['pruned']:,})"),
+        ("E-bar (unit cube)", f"{s['ebar']:.5f}  (sequential {s['ebar_sequential']:.5f}, "
+                              f"polish {s['polish']})"),
+        ("N:K", f"{s['n_to_k']:.1f}:1"),
+        ("3N:4K", f"{s['storage_ratio']:.1f}:1"),
+        ("error (scan units)", f"mean {s['error_mean']:.4g}, std {s['error_std']:.4g}"),
+        ("fit time", f"{s['fit_seconds']:.2f} s  ({s['steps']:,} steps, "
+                     f"{s['us_per_step']:.2f} us/step, polish {s['polish_seconds']:.2f} s)"),
+    ]
+    w = max(len(k) for k, _ in rows)
+    for k, v in rows:
+        print(f"  {k:<{w}}  {v}", file=out)
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    cfg = _config(args)
+    scan = load_scan(args.scan)
+    out = Path(args.output)
+    if out.suffix.lower() != ".asrbf":
+        raise AsrbfError(f"{out}: a network file must end in .asrbf")
+    net = fit(scan, cfg, seed=args.seed, view_axis=args.view_axis,
+              progress=None if not args.json else False)
+    net.save(out, float32=args.float32, inputs=(args.scan,))
+    summary = _fit_summary(net) | {"output": str(out)}
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"fitted {args.scan} -> {out}")
+        _print_summary(summary)
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    net = Network.load(args.network)
+    st = net.stats()
+    data = {"n_neurons": net.n_neurons, "format_version": FORMAT_VERSION,
+            "config": net.config.to_dict(), "frame": net.frame.to_dict(),
+            "stats": st.__dict__, "info": net.info,
+            "log": net.log.counters() if net.log else None}
+    if args.json:
+        print(json.dumps(data))
+        return 0
+    print(f"{args.network}: ASRBF network, format version {FORMAT_VERSION}")
+    print(f"  neurons K          {net.n_neurons:,}")
+    if "n_points" in net.info:
+        n = net.info["n_points"]
+        print(f"  fitted on N        {n:,} points  (N:K {net.compression_ratio():.1f}:1, "
+              f"3N:4K {net.storage_ratio():.1f}:1)")
+    if "ebar" in net.info:
+        print(f"  E-bar              {net.info['ebar']:.5f}")
+    print(f"  width  max/min/mean/std   {st.width_max:.4f} {st.width_min:.4f} "
+          f"{st.width_mean:.4f} {st.width_std:.4f}")
+    print(f"  |weight| max/min/mean/std {st.weight_max:.4f} {st.weight_min:.4f} "
+          f"{st.weight_mean:.4f} {st.weight_std:.4f}")
+    c = net.config
+    print(f"  learned with       update={c.update} pruning={c.pruning} decay={c.decay} "
+          f"polish={c.polish} passes={c.passes}")
+    return 0
+
+
+def _cmd_reconstruct(args: argparse.Namespace) -> int:
+    net = Network.load(args.network)
+    footprint = load_scan(args.footprint) if args.footprint else None
+    mesh = reconstruct(net, resolution=args.resolution, spacing_abs=args.spacing,
+                       footprint=footprint, margin_rel=args.margin)
+    save_mesh(mesh, args.output, overwrite_inputs=(args.network, args.footprint))
+    if args.json:
+        print(json.dumps({"output": args.output, "vertices": mesh.n_vertices,
+                          "faces": mesh.n_faces}))
+    else:
+        print(f"wrote {args.output}: {mesh.n_vertices:,} vertices, {mesh.n_faces:,} faces")
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    src = face_map_path()
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"asrbf-mesh {__version__} demo: the face range map shipped with pymeshlab\n  {src}")
+    scan = load_scan(src)
+    net = fit(scan, seed=args.seed, progress=None)
+    net_path = net.save(out / "face.asrbf")
+    fp = reconstruct(net, footprint=scan)
+    full = reconstruct(net)
+    p1 = save_mesh(fp, out / "face_footprint.ply")
+    p2 = save_mesh(full, out / "face_full.ply")
+    s = _fit_summary(net)
+    _print_summary(s)
+    print(f"  wrote {net_path} ({net_path.stat().st_size:,} bytes)")
+    print(f"  wrote {p1} ({fp.n_vertices:,} vertices, footprint of the scan)")
+    print(f"  wrote {p2} ({full.n_vertices:,} vertices, whole normalized square)")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser of the ``asrbf`` command."""
+    p = argparse.ArgumentParser(
+        prog="asrbf", description="Adaptive sequential learning RBF networks for range scans.")
+    p.add_argument("--version", action="version", version=f"asrbf-mesh {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    f = sub.add_parser("fit", help="fit a network to a scan and save it (.asrbf)")
+    f.add_argument("scan", help="scan file (PLY, OBJ, OFF, STL, XYZ/PTS/TXT, NPY)")
+    f.add_argument("-o", "--output", required=True, help="output network file (.asrbf)")
+    f.add_argument("--float32", action="store_true", help="store parameters in single precision")
+    f.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    _add_learning(f)
+    f.set_defaults(func=_cmd_fit)
+
+    i = sub.add_parser("info", help="describe a network file")
+    i.add_argument("network")
+    i.add_argument("--json", action="store_true")
+    i.set_defaults(func=_cmd_info)
+
+    r = sub.add_parser("reconstruct", help="mesh the network surface on a grid")
+    r.add_argument("network")
+    r.add_argument("-o", "--output", required=True, help="output mesh (PLY, OBJ, OFF, STL)")
+    g = r.add_mutually_exclusive_group()
+    g.add_argument("--resolution", type=int, help="samples along the longer side")
+    g.add_argument("--spacing", type=float, help="grid spacing in scan units")
+    r.add_argument("--footprint", help="keep only cells holding data of this scan")
+    r.add_argument("--margin", type=float, default=0.0,
+                   help="extend the full square by this fraction per side [default: 0]")
+    r.add_argument("--json", action="store_true")
+    r.set_defaults(func=_cmd_reconstruct)
+
+    d = sub.add_parser("demo", help="fit the face range map shipped with pymeshlab")
+    d.add_argument("-o", "--output", default="asrbf-demo", help="output folder [asrbf-demo]")
+    d.add_argument("--seed", type=int, default=0)
+    d.set_defaults(func=_cmd_demo)
+    return p
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"asrbf: warning: {message}", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``asrbf`` command; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    warnings.showwarning = _show_warning
+    try:
+        return int(args.func(args))
+    except AsrbfError as exc:
+        print(f"asrbf: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("asrbf: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,185 @@
+"""Learning parameters of the ASRBF network (:class:`FitConfig`).
+
+Defaults follow section 5.1 of the paper (Meng et al., "Parameterization of
+point-cloud freeform surfaces using adaptive sequential learning RBF networks"),
+expressed in the unit cube; the places where the paper is silent or where its
+rule does not work as written are documented per field and in DESIGN.md §3.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from .errors import ConfigError
+
+__all__ = ["FitConfig", "UPDATES", "PRUNINGS", "DECAYS", "POLISHES"]
+
+UPDATES = ("nekf", "nekf-neighbourhood", "gekf", "gd")
+PRUNINGS = ("none", "literal", "support")
+DECAYS = ("observation", "neurons")
+POLISHES = ("none", "weights", "full")
+
+Update = Literal["nekf", "nekf-neighbourhood", "gekf", "gd"]
+Pruning = Literal["none", "literal", "support"]
+Decay = Literal["observation", "neurons"]
+Polish = Literal["none", "weights", "full"]
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """Parameters of adaptive sequential learning, in the unit cube.
+
+    Parameters
+    ----------
+    error_threshold : float
+        E, criterion 2: a neuron may be added where ``|z - f(x)| > E``.
+    rms_threshold : float
+        E_omega, criterion 3: growth goes on while the RMS error over the last
+        ``window`` observations exceeds it.
+    d_max : float
+        D_max, the initial neuron separation distance (criterion 1).
+    d_min : float or None
+        D_min, the final separation ("neuron separation level"). ``None``: twice
+        the scan's sampling spacing, measured from the data (section 5.1).
+    gamma : float
+        Decay factor of the separation distance, eq. (4).
+    decay : {"observation", "neurons"}
+        What eq. (4) is indexed by. ``"neurons"`` is the paper's text
+        (``D_K = max(D_max gamma^K, D_min)``); it stalls at about a dozen neurons,
+        because a dozen spread neurons cover the unit square closer than ``D_K``.
+        ``"observation"`` (default) decays with the observation index as in the
+        RAN/MRAN networks the method builds on, which gives the paper's results.
+    psi : float
+        Overlap factor: a new neuron's width is ``psi`` times the distance to the
+        nearest neuron, eq. (7). 0.7 for detailed scans, 0.8 for smooth objects.
+    window : int
+        omega, the RMS window of criterion 3.
+    prune_threshold : float
+        P, the contribution-ratio threshold of pruning, eqs. (11)-(13).
+    pruning : {"literal", "support", "none"}
+        ``"literal"``: the paper's rule, a neuron whose ratio stays below P for
+        ``prune_window`` consecutive observations is removed. ``"support"``: only
+        observations inside the neuron's truncated support count. ``"none"``.
+    prune_window : int or None
+        Observations counted by pruning; ``None`` means ``window`` (the paper).
+    passes : int
+        How many times the data is replayed, each time in a new random order.
+    update : {"nekf", "nekf-neighbourhood", "gekf", "gd"}
+        Parameter updater. ``"nekf"``: the nearest neuron (K' = 1) and a0, the
+        paper's experiments. ``"nekf-neighbourhood"``: every neuron within
+        ``neighbourhood_factor * D`` of the input. ``"gekf"``: one covariance over
+        all parameters, O((4K)^2) per step, for small problems. ``"gd"``: gradient
+        descent with rate ``gd_rate``.
+    neighbourhood_factor, max_neighbours
+        Radius (in units of the current separation D) and cap of the NEKF
+        neighbourhood.
+    measurement_noise : float
+        R, the EKF measurement noise variance.
+    process_noise : float
+        q, the EKF process noise, relative to the prior (P0 and Q are
+        ``diag(1, 1, sigma^2, sigma^2)`` per neuron, for ``(a, log sigma, u)``).
+    prior_variance : float
+        Scale of P0.
+    gd_rate : float
+        Step size of the ``"gd"`` updater.
+    support : float
+        Gaussians are truncated at ``support * sigma`` (exp(-12.25) = 5e-6 of
+        their peak at the default 3.5), in learning and in evaluation alike.
+    max_neurons : int or None
+        Hard cap on K (growth stops, learning goes on).
+    polish : {"none", "weights", "full"}
+        Batch stage after learning: sparse least squares of the weights with
+        centres and widths fixed, or Levenberg-Marquardt over all parameters.
+        ``"none"`` is the paper's method.
+    polish_iterations : int
+        Levenberg-Marquardt iterations of ``polish="full"``.
+    polish_ridge : float
+        Tikhonov weight pulling polished parameters toward the learned ones,
+        relative to the mean diagonal of the normal equations; keeps neurons
+        with little data under them (holes, borders) where learning left them.
+    """
+
+    error_threshold: float = 0.01
+    rms_threshold: float = 0.01
+    d_max: float = 0.4
+    d_min: float | None = None
+    gamma: float = 0.99
+    decay: Decay = "observation"
+    psi: float = 0.7
+    window: int = 1000
+    prune_threshold: float = 0.001
+    pruning: Pruning = "support"
+    prune_window: int | None = None
+    passes: int = 2
+    update: Update = "nekf"
+    neighbourhood_factor: float = 1.5
+    max_neighbours: int = 8
+    measurement_noise: float = 0.01
+    process_noise: float = 1e-4
+    prior_variance: float = 1.0
+    gd_rate: float = 0.05
+    support: float = 3.5
+    max_neurons: int | None = None
+    polish: Polish = "weights"
+    polish_iterations: int = 4
+    polish_ridge: float = 1e-4
+
+    def __post_init__(self) -> None:
+        def positive(name: str) -> None:
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"{name} must be a positive finite number, got {v!r}")
+
+        for name in ("error_threshold", "rms_threshold", "d_max", "measurement_noise",
+                     "prior_variance", "gd_rate", "support", "neighbourhood_factor"):
+            positive(name)
+        if self.d_min is not None:
+            positive("d_min")
+            if self.d_min > self.d_max:
+                raise ConfigError(f"d_min ({self.d_min}) must not exceed d_max ({self.d_max})")
+        for name in ("gamma", "psi"):
+            v = getattr(self, name)
+            if not (0.0 < v < 1.0 or (name == "psi" and v == 1.0)):
+                raise ConfigError(f"{name} must lie in (0, 1), got {v!r}")
+        if not (0.0 <= self.prune_threshold < 1.0):
+            raise ConfigError(f"prune_threshold must lie in [0, 1), got {self.prune_threshold!r}")
+        if not (self.process_noise >= 0 and math.isfinite(self.process_noise)):
+            raise ConfigError(f"process_noise must be >= 0, got {self.process_noise!r}")
+        if not (self.polish_ridge >= 0 and math.isfinite(self.polish_ridge)):
+            raise ConfigError(f"polish_ridge must be >= 0, got {self.polish_ridge!r}")
+        for name in ("window", "passes", "max_neighbours"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 1):
+                raise ConfigError(f"{name} must be an integer >= 1, got {v!r}")
+        for name in ("prune_window", "max_neurons"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, int) and v >= 1):
+                raise ConfigError(f"{name} must be an integer >= 1 or None, got {v!r}")
+        if not (isinstance(self.polish_iterations, int) and self.polish_iterations >= 0):
+            raise ConfigError(
+                f"polish_iterations must be an integer >= 0, got {self.polish_iterations!r}")
+        for name, allowed in (("update", UPDATES), ("pruning", PRUNINGS), ("decay", DECAYS),
+                              ("polish", POLISHES)):
+            v = getattr(self, name)
+            if v not in allowed:
+                raise ConfigError(f"{name} must be one of {', '.join(allowed)}; got {v!r}")
+
+    def replace(self, **changes: Any) -> FitConfig:
+        """Return a copy with some fields changed (validated)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-JSON form (stored in ``.asrbf`` files)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> FitConfig:
+        """Inverse of :meth:`to_dict`; unknown keys raise :class:`ConfigError`."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ConfigError(f"unknown FitConfig field(s): {', '.join(unknown)}")
+        return cls(**data)

@@ -1,0 +1,248 @@
+"""The scanner frame: view axis, normalization to the unit cube and back.
+
+A range scan is a height field ``depth = f(x, y)`` seen along a view axis. The
+paper normalizes each axis of the scan to [0, 1] (section 4.1) and learns in that
+unit cube; :class:`Frame` holds the rotation and the per-axis offsets and spans
+to go back to physical units.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .errors import ScanError
+
+__all__ = ["Frame", "HeightField", "HeightFieldWarning", "to_height_field", "VIEW_AXES"]
+
+ViewAxis = Literal["z", "x", "y", "pca"]
+VIEW_AXES = ("z", "x", "y", "pca")
+
+# local axes (columns) for the fixed view axes: right-handed, depth last
+_AXES = {
+    "z": np.eye(3),
+    "x": np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),  # (y, z, x)
+    "y": np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]),  # (z, x, y)
+}
+
+
+class HeightFieldWarning(UserWarning):
+    """The data is far from a single-valued height field in the chosen frame."""
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """Map between world coordinates and the normalized unit cube.
+
+    ``local = world @ rotation``; ``unit = (local - offset) / scale``.
+
+    Parameters
+    ----------
+    rotation : (3, 3) float64 array
+        Orthonormal, right-handed; its columns are the local x, y and depth axes
+        in world coordinates.
+    offset : (3,) float64 array
+        Minimum of the local coordinates.
+    scale : (3,) float64 array
+        Extent of the local coordinates (1 for a zero depth extent).
+    view_axis : str
+        How the rotation was chosen (``"z"``, ``"x"``, ``"y"`` or ``"pca"``).
+    """
+
+    rotation: np.ndarray
+    offset: np.ndarray
+    scale: np.ndarray
+    view_axis: str = "z"
+
+    def __post_init__(self) -> None:
+        for name, shape in (("rotation", (3, 3)), ("offset", (3,)), ("scale", (3,))):
+            arr = np.array(getattr(self, name), dtype=np.float64)
+            if arr.shape != shape or not np.all(np.isfinite(arr)):
+                raise ValueError(f"Frame.{name} must be a finite array of shape {shape}")
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+        if np.any(self.scale <= 0):
+            raise ValueError("Frame.scale must be positive")
+
+    def to_unit(self, world: np.ndarray) -> np.ndarray:
+        """World (N, 3) points to unit-cube coordinates (N, 3)."""
+        return (np.asarray(world, dtype=np.float64) @ self.rotation - self.offset) / self.scale
+
+    def to_world(self, unit: np.ndarray) -> np.ndarray:
+        """Unit-cube (N, 3) points back to world coordinates (N, 3)."""
+        local = np.asarray(unit, dtype=np.float64) * self.scale + self.offset
+        return local @ self.rotation.T
+
+    def xy_to_unit(self, xy: np.ndarray) -> np.ndarray:
+        """Local physical (x, y) (M, 2) to unit-square coordinates (M, 2)."""
+        return (np.asarray(xy, dtype=np.float64) - self.offset[:2]) / self.scale[:2]
+
+    def xy_from_unit(self, uv: np.ndarray) -> np.ndarray:
+        """Unit-square (M, 2) to local physical (x, y) (M, 2)."""
+        return np.asarray(uv, dtype=np.float64) * self.scale[:2] + self.offset[:2]
+
+    def to_dict(self) -> dict:
+        """Plain-JSON form."""
+        return {"rotation": self.rotation.tolist(), "offset": self.offset.tolist(),
+                "scale": self.scale.tolist(), "view_axis": self.view_axis}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Frame:
+        """Inverse of :meth:`to_dict`."""
+        return cls(np.array(d["rotation"]), np.array(d["offset"]), np.array(d["scale"]),
+                   str(d["view_axis"]))
+
+
+@dataclass(frozen=True, eq=False)
+class HeightField:
+    """Scan points in the unit cube, ready for learning.
+
+    Parameters
+    ----------
+    xy : (N, 2) float64 array
+        Network inputs in [0, 1]^2.
+    z : (N,) float64 array
+        Depths in [0, 1].
+    frame : Frame
+        The map back to world units.
+    spacing : float
+        Typical sampling spacing in the unit square (median xy nearest-neighbour
+        distance); the automatic D_min is twice this value (paper, section 5.1).
+    """
+
+    xy: np.ndarray
+    z: np.ndarray
+    frame: Frame
+    spacing: float
+
+    @property
+    def n_points(self) -> int:
+        """Number of points N."""
+        return int(len(self.z))
+
+
+def _rotation(points: np.ndarray, view_axis: str) -> np.ndarray:
+    if view_axis in _AXES:
+        return _AXES[view_axis].copy()
+    if view_axis != "pca":
+        raise ScanError(f"view_axis must be one of {', '.join(VIEW_AXES)}; got {view_axis!r}")
+    centred = points - points.mean(axis=0)
+    _, vecs = np.linalg.eigh(centred.T @ centred)  # ascending eigenvalues
+    depth, ax1, ax0 = vecs[:, 0], vecs[:, 1], vecs[:, 2]
+    # deterministic signs: largest component of each axis positive
+    ax0 = ax0 * np.sign(ax0[np.argmax(np.abs(ax0))])
+    depth = depth * np.sign(depth[np.argmax(np.abs(depth))])
+    ax1 = np.cross(depth, ax0)
+    return np.column_stack([ax0, ax1, depth])
+
+
+def sampling_spacing(xy: np.ndarray, *, max_samples: int = 50_000, seed: int = 0) -> float:
+    """Median nearest-neighbour distance of (N, 2) points (ignoring exact duplicates).
+
+    Examples
+    --------
+    >>> g = np.stack(np.meshgrid(np.arange(5.0), np.arange(4.0)), -1).reshape(-1, 2)
+    >>> float(sampling_spacing(g / 100))
+    0.01
+    """
+    tree = cKDTree(xy)
+    if len(xy) > max_samples:
+        rng = np.random.default_rng(seed)
+        q = xy[rng.choice(len(xy), max_samples, replace=False)]
+    else:
+        q = xy
+    d, _ = tree.query(q, k=min(4, len(xy)))
+    d = d[:, 1:]
+    d = np.where(d > 0, d, np.inf).min(axis=1)
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        raise ScanError("all points share the same (x, y): no sampling spacing")
+    return float(np.median(d))
+
+
+def _height_field_violation(xy: np.ndarray, z: np.ndarray, spacing: float) -> float:
+    """Fraction of occupied xy cells (2 x spacing) whose depth range exceeds 0.1."""
+    cell = 2.0 * spacing
+    ij = np.floor(xy / cell).astype(np.int64)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    zz = z[order]
+    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    zmax = np.maximum.reduceat(zz, starts)
+    zmin = np.minimum.reduceat(zz, starts)
+    counts = np.diff(np.r_[starts, len(k)])
+    multi = counts > 1
+    if not np.any(multi):
+        return 0.0
+    return float(np.mean((zmax - zmin)[multi] > 0.1))
+
+
+def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
+                    warn_fraction: float = 0.05) -> HeightField:
+    """Normalize scan points into the unit cube along a view axis.
+
+    Parameters
+    ----------
+    points : (N, 3) float64 array
+        Scan points in world units.
+    view_axis : {"z", "x", "y", "pca"}
+        Depth direction: a world axis, or the smallest principal axis.
+    warn_fraction : float
+        Emit :class:`HeightFieldWarning` when more than this fraction of the
+        occupied xy cells hold points whose depths differ by more than 10 % of the
+        depth range (the data then folds over itself in this frame).
+
+    Returns
+    -------
+    HeightField
+
+    Raises
+    ------
+    ScanError
+        If x or y has zero extent in the chosen frame, or the points are not finite.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> p = rng.random((500, 3)) * [10, 20, 1] + [5, 0, -3]
+    >>> hf = to_height_field(p)
+    >>> bool(hf.xy.min() == 0.0 and hf.xy.max() == 1.0)
+    True
+    >>> bool(np.allclose(hf.frame.to_world(np.c_[hf.xy, hf.z]), p))
+    True
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ScanError(f"points must have shape (N, 3), got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ScanError("points contain NaN or infinite coordinates")
+    rot = _rotation(pts, view_axis)
+    local = pts @ rot
+    lo = local.min(axis=0)
+    span = local.max(axis=0) - lo
+    tiny = 1e-12 * max(float(np.abs(local).max()), 1e-300)
+    for axis, name in ((0, "x"), (1, "y")):
+        if span[axis] <= tiny:
+            raise ScanError(
+                f"zero {name} extent in the {view_axis!r} view frame: a height field needs "
+                "an x and a y extent (try another --view-axis)")
+    if span[2] <= tiny:
+        span[2] = 1.0  # flat scan: valid, depth maps to 0
+    frame = Frame(rot, lo, span, view_axis)
+    unit = (local - lo) / span
+    xy = np.ascontiguousarray(np.clip(unit[:, :2], 0.0, 1.0))
+    z = np.ascontiguousarray(np.clip(unit[:, 2], 0.0, 1.0))
+    spacing = sampling_spacing(xy)
+    bad = _height_field_violation(xy, z, spacing)
+    if bad > warn_fraction:
+        warnings.warn(
+            f"{100 * bad:.0f}% of the occupied xy cells hold points whose depths differ by more "
+            f"than 10% of the depth range: the data is not a height field along the "
+            f"{view_axis!r} axis; try --view-axis pca or another axis",
+            HeightFieldWarning, stacklevel=2)
+    return HeightField(xy, z, frame, spacing)

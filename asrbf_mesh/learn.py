@@ -1,0 +1,383 @@
+"""Adaptive sequential learning of a Gaussian RBF network (the paper's Algorithm 1).
+
+Each observation ``(x_n, z_n)`` of a random replay of the scan goes through:
+
+1. growth: a neuron ``u = x_n, a = r_n, sigma = psi ||x_n - u_near||`` is added when
+   the input is novel: far from every centre (``> D``), badly fitted
+   (``|r_n| > E``) and the windowed RMS error is still above ``E_omega``;
+2. optimization: otherwise the nearest neuron (or a neighbourhood) and the bias
+   are corrected by the NEKF (or GEKF / gradient descent);
+3. pruning: neurons whose contribution ratio stays below ``P`` are removed.
+
+The loop runs in compiled code (:mod:`asrbf_mesh._learn_kernels`); this module owns
+the state, feeds it chunk by chunk, grows its arrays, shows progress and builds
+the :class:`~asrbf_mesh.network.Network`.
+
+References
+----------
+Meng, Q., Li, B., Holstein, H., Liu, Y. "Parameterization of point-cloud freeform
+surfaces using adaptive sequential learning RBF networks", Pattern Recognition 46
+(2013), sections 3 and 5.1.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from . import _learn_kernels as _lk
+from ._version import __version__
+from .config import FitConfig
+from .errors import FitError, ScanError
+from .frame import HeightField, to_height_field
+from .io import Scan
+from .network import FitLog, Network
+
+__all__ = ["fit", "learn", "auto_d_min", "residuals", "MIN_POINTS", "LearnedState"]
+
+MIN_POINTS = 10
+_CENTRE_BOX = (-0.25, 1.25)
+_SIGMA_RANGE = (1e-5, 2.0)
+_CHUNK = 16_384
+_LOG_POINTS = 2_000
+
+
+def auto_d_min(spacing: float) -> float:
+    """D_min = twice the sampling spacing (paper, section 5.1), kept within [1e-3, 0.2].
+
+    Examples
+    --------
+    >>> auto_d_min(1 / 200)
+    0.01
+    """
+    return float(min(max(2.0 * spacing, 1e-3), 0.2))
+
+
+def _pow2_at_most(v: float) -> int:
+    return 1 << max(0, int(math.floor(math.log2(max(v, 1.0)))))
+
+
+class _State:
+    """All arrays of the learning kernel; grows its per-slot arrays on demand."""
+
+    def __init__(self, cfg: FitConfig, d_min: float, n_points: int, total_steps: int,
+                 window: int, prune_window: int) -> None:
+        self.cf = np.zeros(_lk.CF_SIZE)
+        self.ci = np.zeros(_lk.CI_SIZE, dtype=np.int64)
+        cf, ci = self.cf, self.ci
+        cf[_lk.CF_E] = cfg.error_threshold
+        cf[_lk.CF_EW] = cfg.rms_threshold
+        cf[_lk.CF_DMAX] = cfg.d_max
+        cf[_lk.CF_DMIN] = d_min
+        cf[_lk.CF_GAMMA] = cfg.gamma
+        cf[_lk.CF_PSI] = cfg.psi
+        cf[_lk.CF_PRUNE] = cfg.prune_threshold
+        cf[_lk.CF_R] = cfg.measurement_noise
+        cf[_lk.CF_Q] = cfg.process_noise
+        cf[_lk.CF_P0] = cfg.prior_variance
+        cf[_lk.CF_SUPPORT] = cfg.support
+        cf[_lk.CF_NBR] = cfg.neighbourhood_factor
+        cf[_lk.CF_GD] = cfg.gd_rate
+        cf[_lk.CF_SMIN], cf[_lk.CF_SMAX] = _SIGMA_RANGE
+        cf[_lk.CF_BOXLO], cf[_lk.CF_BOXHI] = _CENTRE_BOX
+        ci[_lk.CI_WINDOW] = window
+        ci[_lk.CI_PWIN] = prune_window
+        ci[_lk.CI_PRUNE] = ("none", "literal", "support").index(cfg.pruning)
+        ci[_lk.CI_UPDATE] = ("nekf", "nekf-neighbourhood", "gekf", "gd").index(cfg.update)
+        ci[_lk.CI_DECAY] = ("observation", "neurons").index(cfg.decay)
+        ci[_lk.CI_MAXNB] = cfg.max_neighbours
+        ci[_lk.CI_MAXK] = cfg.max_neurons if cfg.max_neurons is not None else 2**62
+        ci[_lk.CI_LOGSTRIDE] = max(1, total_steps // _LOG_POINTS)
+        box = _CENTRE_BOX[1] - _CENTRE_BOX[0]
+        ci[_lk.CI_GC] = int(min(max(box / d_min, 8), 1024))
+        g0 = _pow2_at_most(min(1.0 / (cfg.support * cfg.psi * d_min), 1024))
+        ci[_lk.CI_G0] = g0
+        ci[_lk.CI_NLEV] = int(math.log2(g0)) + 1
+
+        self.fs = np.zeros(_lk.FS_SIZE)
+        self.fs[_lk.FS_P00] = cfg.prior_variance
+        self.st = np.zeros(_lk.ST_SIZE, dtype=np.int64)
+        gc = int(ci[_lk.CI_GC])
+        self.c_head = np.full(gc * gc, -1, dtype=np.int64)
+        sizes = [(g0 >> lev) ** 2 for lev in range(int(ci[_lk.CI_NLEV]))]
+        self.lev_off = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self.l_head = np.full(int(self.lev_off[-1]), -1, dtype=np.int64)
+        self.lev_count = np.zeros(len(sizes), dtype=np.int64)
+        self.wbuf = np.zeros(window)
+        n_log = total_steps // int(ci[_lk.CI_LOGSTRIDE]) + 2
+        self.log_t = np.zeros(n_log, dtype=np.int64)
+        self.log_k = np.zeros(n_log, dtype=np.int64)
+        self.log_rms = np.zeros(n_log)
+        self.log_sig = np.zeros(n_log)
+        self.log_amp = np.zeros(n_log)
+        self.gekf = cfg.update == "gekf"
+        self.cap = 0
+        self._alloc(256 if self.gekf else 1024)
+
+    # per-slot arrays and their fill values
+    _SLOT = {"W": (np.float64, (4,), 0.0), "P": (np.float64, (4, 4), 0.0),
+             "alive": (np.int8, (), 0), "gen": (np.int64, (), 0), "free": (np.int64, (), 0),
+             "last_active": (np.int64, (), 0), "miss": (np.int64, (), 0),
+             "hk": (np.int64, (), 0), "hs": (np.int64, (), 0), "hg": (np.int64, (), 0),
+             "c_nxt": (np.int64, (), -1), "c_prv": (np.int64, (), -1),
+             "c_cell": (np.int64, (), -1), "l_nxt": (np.int64, (), -1),
+             "l_prv": (np.int64, (), -1), "l_cell": (np.int64, (), -1),
+             "l_lev": (np.int64, (), 0)}
+
+    def _alloc(self, cap: int) -> None:
+        old = self.cap
+        for name, (dt, tail, fill) in self._SLOT.items():
+            arr = np.full((cap, *tail), fill, dtype=dt)
+            if old:
+                arr[:old] = getattr(self, name)
+            setattr(self, name, arr)
+        if self.gekf:
+            n = 1 + 4 * cap
+            if n > 8001:
+                raise FitError(
+                    "the GEKF updater holds a full covariance and is limited to 2000 neurons; "
+                    "this fit needs more (use update='nekf' or a subsample)")
+            pg = np.zeros((n, n))
+            if old:
+                m = 1 + 4 * old
+                pg[:m, :m] = self.Pg
+            else:
+                pg[0, 0] = self.cf[_lk.CF_P0]
+            self.Pg = pg
+        else:
+            self.Pg = np.zeros((1, 1))
+        self.cap = cap
+
+    def run(self, X: np.ndarray, Z: np.ndarray, order: np.ndarray, t_end: int) -> None:
+        pos = 0
+        while True:
+            status, pos = _lk.run_steps(
+                X, Z, order, t_end, self.cf, self.ci, self.fs, self.st, self.W, self.P,
+                self.alive, self.gen, self.free, self.last_active, self.miss, self.hk, self.hs,
+                self.hg, self.c_head, self.c_nxt, self.c_prv, self.c_cell, self.l_head,
+                self.l_nxt, self.l_prv, self.l_cell, self.l_lev, self.lev_off, self.lev_count,
+                self.wbuf, self.Pg, self.log_t, self.log_k, self.log_rms, self.log_sig,
+                self.log_amp, pos)
+            if status == _lk.DONE:
+                return
+            if status == _lk.NEED_SLOTS:
+                self._alloc(2 * self.cap)
+            else:  # NEED_LOG: cannot happen with the precomputed size; be safe
+                for name in ("log_t", "log_k", "log_rms", "log_sig", "log_amp"):
+                    arr = getattr(self, name)
+                    setattr(self, name, np.concatenate([arr, np.zeros_like(arr)]))
+
+
+@dataclass(frozen=True)
+class LearnedState:
+    """Raw outcome of sequential learning, in the unit cube (before any polish)."""
+
+    a0: float
+    centers: np.ndarray
+    widths: np.ndarray
+    weights: np.ndarray
+    log: FitLog
+    d_min: float
+    steps: int
+    seconds: float
+
+
+def _progress(total: int, enabled: bool | None) -> Callable[[int], None] | None:
+    """Return a tick function driving a tqdm bar shown after the first second of work."""
+    if enabled is False or (enabled is None and not sys.stderr.isatty()):
+        return None
+    from tqdm import tqdm
+
+    bar: Any = None
+    t0 = time.perf_counter()
+    done = 0
+
+    def update(n: int) -> None:
+        nonlocal bar, done
+        done += n
+        if bar is None and time.perf_counter() - t0 > 1.0 and done < total:
+            bar = tqdm(total=total, initial=done, unit="step", unit_scale=True,
+                       desc="learning", leave=False, file=sys.stderr)
+        elif bar is not None:
+            bar.update(n)
+        if bar is not None and done >= total:
+            bar.close()
+
+    return update
+
+
+def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
+          progress: bool | None = None) -> LearnedState:
+    """Run adaptive sequential learning (Algorithm 1) on a height field.
+
+    Parameters
+    ----------
+    hf : HeightField
+        Points in the unit cube.
+    config : FitConfig, optional
+        Learning parameters (paper defaults when omitted).
+    seed : int
+        Seeds the random replay order; the same seed gives the same network, bit
+        for bit.
+    progress : bool, optional
+        Progress bar on stderr (default: when stderr is a terminal and the fit
+        takes more than a second).
+
+    Returns
+    -------
+    LearnedState
+
+    Raises
+    ------
+    ScanError
+        Fewer than :data:`MIN_POINTS` points.
+    FitError
+        Learning produced no neuron.
+    """
+    cfg = config or FitConfig()
+    n = hf.n_points
+    if n < MIN_POINTS:
+        raise ScanError(f"a fit needs at least {MIN_POINTS} points, got {n}")
+    d_min = cfg.d_min if cfg.d_min is not None else auto_d_min(hf.spacing)
+    d_min = min(d_min, cfg.d_max)
+    total = n * cfg.passes
+    window = cfg.window
+    prune_window = cfg.prune_window or cfg.window
+    state = _State(cfg, d_min, n, total, window, prune_window)
+    X = np.ascontiguousarray(hf.xy, dtype=np.float64)
+    Z = np.ascontiguousarray(hf.z, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    tick = _progress(total, progress)
+    t0 = time.perf_counter()
+    for _ in range(cfg.passes):
+        order = rng.permutation(n).astype(np.int64)
+        for start in range(0, n, _CHUNK):
+            chunk = order[start:start + _CHUNK]
+            state.run(X, Z, chunk, int(state.st[_lk.ST_T]) + len(chunk))
+            if tick:
+                tick(len(chunk))
+    seconds = time.perf_counter() - t0
+    st = state.st
+    alive = np.flatnonzero(state.alive[: st[_lk.ST_SLOTS]])
+    if alive.size == 0:
+        raise FitError("learning produced no neuron (is the scan flat? lower error_threshold)")
+    nl = int(st[_lk.ST_NLOG])
+    log = FitLog(state.log_t[:nl].copy(), state.log_k[:nl].copy(), state.log_rms[:nl].copy(),
+                 state.log_sig[:nl].copy(), state.log_amp[:nl].copy(),
+                 added=int(st[_lk.ST_ADDED]), pruned=int(st[_lk.ST_PRUNED]),
+                 reset=int(st[_lk.ST_RESET]), diverged=int(st[_lk.ST_DIVERGED]))
+    W = state.W[alive]
+    return LearnedState(float(state.fs[_lk.FS_A0]), W[:, 2:4].copy(), W[:, 1].copy(),
+                        W[:, 0].copy(), log, float(d_min), int(st[_lk.ST_T]), seconds)
+
+
+def source_hash(points: np.ndarray) -> str:
+    """SHA-256 of the point coordinates (provenance of a network)."""
+    return hashlib.sha256(np.ascontiguousarray(points, dtype=np.float64).tobytes()).hexdigest()
+
+
+def residuals(net: Network, hf: HeightField) -> np.ndarray:
+    """Unit-cube residuals ``z_n - f(x_n)`` of a network on a height field, (N,)."""
+    return hf.z - net.evaluate(hf.xy, unit=True)
+
+
+def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int = 0,
+        view_axis: str = "z", progress: bool | None = None, **overrides: Any) -> Network:
+    """Fit an ASRBF network to a range scan: learning, then the optional polish.
+
+    Parameters
+    ----------
+    scan : Scan or (N, 3) array
+        The scan points in world units.
+    config : FitConfig, optional
+        Learning parameters; paper defaults (section 5.1) with D_min from the data.
+    seed : int
+        Random replay order; the same seed gives the same network bit for bit.
+    view_axis : {"z", "x", "y", "pca"}
+        Depth direction of the height field.
+    progress : bool, optional
+        Progress bar on stderr (default: on a terminal, for fits over a second).
+    **overrides
+        FitConfig fields to change, e.g. ``passes=3``.
+
+    Returns
+    -------
+    Network
+        With ``info`` holding ``n_points``, ``ebar`` (mean |f - z| in the unit cube),
+        ``error_mean`` / ``error_std`` (|depth error| in scan units), ``steps``,
+        timings and provenance.
+
+    Raises
+    ------
+    ScanError
+        Unusable points (too few, NaN, zero x or y extent).
+    FitError
+        Learning produced no neuron.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.random((3000, 2))
+    >>> pts = np.c_[xy, np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])]
+    >>> net = fit(pts, seed=0, progress=False)
+    >>> bool(net.info["ebar"] < 0.01)
+    True
+    """
+    from .polish import polish_full, polish_weights
+
+    cfg = (config or FitConfig()).replace(**overrides) if overrides else (config or FitConfig())
+    if isinstance(scan, Scan):
+        points, source = scan.points, scan.source
+    else:
+        points, source = np.asarray(scan, dtype=np.float64), None
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ScanError(f"points must have shape (N, 3), got {points.shape}")
+    if len(points) < MIN_POINTS:
+        raise ScanError(f"a fit needs at least {MIN_POINTS} points, got {len(points)}")
+    hf = to_height_field(points, view_axis=view_axis)  # type: ignore[arg-type]
+    t0 = time.perf_counter()
+    learned = learn(hf, cfg, seed=seed, progress=progress)
+    a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
+    tp = time.perf_counter()
+    if cfg.polish == "weights":
+        pr = polish_weights(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
+                            cfg.polish_ridge)
+    elif cfg.polish == "full":
+        pr = polish_full(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
+                         iterations=cfg.polish_iterations, ridge=cfg.polish_ridge)
+    else:
+        pr = None
+    if pr is not None:
+        a0, centers, widths, weights = pr.a0, pr.centers, pr.widths, pr.weights
+    polish_seconds = time.perf_counter() - tp
+    net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)
+    res = residuals(net, hf)
+    abs_mm = np.abs(res) * hf.frame.scale[2]
+    fit_seconds = time.perf_counter() - t0
+    info: dict[str, Any] = {
+        "n_points": hf.n_points,
+        "n_neurons": net.n_neurons,
+        "source": source,
+        "source_sha256": source_hash(points),
+        "seed": int(seed),
+        "spacing": hf.spacing,
+        "d_min": learned.d_min,
+        "steps": learned.steps,
+        "ebar": float(np.mean(np.abs(res))),
+        "ebar_sequential": pr.ebar_before if pr is not None else float(np.mean(np.abs(res))),
+        "error_mean": float(abs_mm.mean()),
+        "error_std": float(abs_mm.std()),
+        "learn_seconds": learned.seconds,
+        "polish_seconds": polish_seconds,
+        "fit_seconds": fit_seconds,
+        "us_per_step": 1e6 * learned.seconds / max(learned.steps, 1),
+        "version": __version__,
+    }
+    return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info)

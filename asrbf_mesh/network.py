@@ -1,0 +1,373 @@
+"""The fitted Gaussian RBF network: evaluation, statistics and the ``.asrbf`` file.
+
+``f(x) = a0 + sum_k a_k exp(-||x - u_k||^2 / sigma_k^2)`` (paper, eqs. 1-2), learned
+in the unit square; :class:`Network` evaluates it in physical units through its
+:class:`~asrbf_mesh.frame.Frame`.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import _network_kernels as _nk
+from ._atomic import atomic_path, check_output_path
+from .config import FitConfig
+from .errors import AsrbfError, NetworkFileError
+from .frame import Frame
+
+__all__ = ["Network", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
+
+FORMAT_NAME = "asrbf-network"
+FORMAT_VERSION = 1
+_ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member dates: same network, same bytes
+
+
+@dataclass(frozen=True, eq=False)
+class FitLog:
+    """Learning history sampled at a fixed stride (paper, Figs. 6 and 9).
+
+    Parameters
+    ----------
+    step : (L,) int64 array
+        Observation index n of each record.
+    n_neurons : (L,) int64 array
+        K at that step.
+    rms : (L,) float64 array
+        Windowed RMS error e_n^omega (eq. 6), unit cube.
+    mean_width, mean_weight : (L,) float64 arrays
+        Mean sigma and mean |a| over the alive neurons.
+    added, pruned, reset, diverged : int
+        Neurons added, pruned, covariance blocks reset and neurons removed by the
+        numerical guard over the whole run.
+    """
+
+    step: np.ndarray
+    n_neurons: np.ndarray
+    rms: np.ndarray
+    mean_width: np.ndarray
+    mean_weight: np.ndarray
+    added: int = 0
+    pruned: int = 0
+    reset: int = 0
+    diverged: int = 0
+
+    _ARRAYS = ("step", "n_neurons", "rms", "mean_width", "mean_weight")
+
+    def counters(self) -> dict[str, int]:
+        """Return the scalar counters as a dict."""
+        return {"added": self.added, "pruned": self.pruned, "reset": self.reset,
+                "diverged": self.diverged}
+
+
+@dataclass(frozen=True)
+class NeuronStats:
+    """Width and weight statistics of a network (the paper's Table 1), unit cube."""
+
+    n_neurons: int
+    width_max: float
+    width_min: float
+    width_mean: float
+    width_std: float
+    weight_max: float
+    weight_min: float
+    weight_mean: float
+    weight_std: float
+
+
+@dataclass(frozen=True, eq=False)
+class Network:
+    """An immutable, picklable Gaussian RBF network fitted to a height field.
+
+    Parameters
+    ----------
+    a0 : float
+        Bias, unit cube.
+    centers : (K, 2) float64 array
+        Neuron centres u_k in the unit square.
+    widths : (K,) float64 array
+        Widths sigma_k (> 0), unit square.
+    weights : (K,) float64 array
+        Weights a_k, unit depth.
+    frame : Frame
+        Map between the unit cube and world units.
+    config : FitConfig
+        Parameters the network was learned with.
+    log : FitLog, optional
+        Learning history.
+    info : dict
+        Provenance and fit figures (JSON-serializable): ``n_points``,
+        ``source_sha256``, ``d_min``, ``fit_seconds``, ...
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from asrbf_mesh.frame import Frame
+    >>> net = Network(0.5, np.array([[0.5, 0.5]]), np.array([0.2]), np.array([0.25]),
+    ...               Frame(np.eye(3), np.zeros(3), np.ones(3)), FitConfig())
+    >>> float(net.evaluate(np.array([[0.5, 0.5]]))[0])
+    0.75
+    """
+
+    a0: float
+    centers: np.ndarray
+    widths: np.ndarray
+    weights: np.ndarray
+    frame: Frame
+    config: FitConfig
+    log: FitLog | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        c = np.array(self.centers, dtype=np.float64).reshape(-1, 2)
+        k = len(c)
+        w = np.array(self.widths, dtype=np.float64).reshape(-1)
+        a = np.array(self.weights, dtype=np.float64).reshape(-1)
+        if len(w) != k or len(a) != k:
+            raise ValueError(f"centers ({k}), widths ({len(w)}) and weights ({len(a)}) differ")
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(w)) and np.all(np.isfinite(a))
+                and np.isfinite(self.a0)):
+            raise ValueError("network parameters must be finite")
+        if np.any(w <= 0):
+            raise ValueError("widths must be positive")
+        for name, arr in (("centers", c), ("widths", w), ("weights", a)):
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "a0", float(self.a0))
+
+    # -- pickling: drop the evaluation grid cache ------------------------------------------
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state.pop("_grid", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+
+    # -- sizes ------------------------------------------------------------------------------
+    @property
+    def n_neurons(self) -> int:
+        """K, the number of Gaussian neurons."""
+        return int(len(self.widths))
+
+    def compression_ratio(self, n_points: int | None = None) -> float:
+        """N : K, points per neuron (paper, Table 2)."""
+        n = self._n_points(n_points)
+        return n / max(self.n_neurons, 1)
+
+    def storage_ratio(self, n_points: int | None = None) -> float:
+        """3N : 4K, storage of N 3D points over K four-parameter neurons (Table 2)."""
+        n = self._n_points(n_points)
+        return 3.0 * n / (4.0 * max(self.n_neurons, 1))
+
+    def _n_points(self, n_points: int | None) -> int:
+        if n_points is not None:
+            return int(n_points)
+        if "n_points" not in self.info:
+            raise AsrbfError("n_points is unknown for this network; pass it explicitly")
+        return int(self.info["n_points"])
+
+    def stats(self) -> NeuronStats:
+        """Width and |weight| statistics (the paper's Table 1 reports |a|)."""
+        w = self.widths
+        a = np.abs(self.weights)
+        if self.n_neurons == 0:
+            nan = float("nan")
+            return NeuronStats(0, nan, nan, nan, nan, nan, nan, nan, nan)
+        return NeuronStats(self.n_neurons, float(w.max()), float(w.min()), float(w.mean()),
+                           float(w.std()), float(a.max()), float(a.min()), float(a.mean()),
+                           float(a.std()))
+
+    # -- evaluation -------------------------------------------------------------------------
+    def _grid_arrays(self) -> tuple:
+        cached = self.__dict__.get("_grid")
+        if cached is not None:
+            return cached
+        s = self.config.support
+        if self.n_neurons:
+            lo = np.minimum(self.centers.min(axis=0), 0.0)
+            hi = np.maximum(self.centers.max(axis=0), 1.0)
+            # cells about the size of a typical (median) support, at most 512 per axis
+            cell = max(float(np.median(self.widths)) * s, (hi - lo).max() / 512)
+        else:
+            lo, hi, cell = np.zeros(2), np.ones(2), 1.0
+        g = max(1, int(np.ceil((hi - lo).max() / cell)))
+        h = float((hi - lo).max() / g)
+        start, items = _nk.build_grid(self.centers, self.widths, s, lo.astype(np.float64), h, g)
+        cached = (s, lo.astype(np.float64), h, g, start, items)
+        object.__setattr__(self, "_grid", cached)
+        return cached
+
+    def _eval_unit(self, uv: np.ndarray, want_grad: bool) -> tuple[np.ndarray, np.ndarray]:
+        s, lo, h, g, start, items = self._grid_arrays()
+        return _nk.evaluate(uv, self.a0, self.centers, self.widths, self.weights, s, lo, h, g,
+                            start, items, want_grad)
+
+    @staticmethod
+    def _points(xy: np.ndarray) -> np.ndarray:
+        arr = np.ascontiguousarray(xy, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != 2:
+            raise AsrbfError(f"xy must have shape (M, 2), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise AsrbfError("xy contains NaN or infinite values")
+        return arr
+
+    def evaluate(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+        """Depth of the surface at (M, 2) points.
+
+        Parameters
+        ----------
+        xy : (M, 2) array
+            Points in the frame's local physical (x, y) (for view axis ``"z"`` these
+            are the world x and y), or in the unit square if ``unit``.
+        unit : bool
+            Work in the unit cube (inputs and output) instead of physical units.
+
+        Returns
+        -------
+        (M,) float64 array
+            Depth in physical units (or unit-cube depth).
+        """
+        pts = self._points(xy)
+        uv = pts if unit else self.frame.xy_to_unit(pts)
+        f, _ = self._eval_unit(np.ascontiguousarray(uv), False)
+        if unit:
+            return f
+        return f * self.frame.scale[2] + self.frame.offset[2]
+
+    def gradient(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+        """Analytic gradient d depth / d(x, y), (M, 2), in the units of :meth:`evaluate`."""
+        pts = self._points(xy)
+        uv = pts if unit else self.frame.xy_to_unit(pts)
+        _, grad = self._eval_unit(np.ascontiguousarray(uv), True)
+        if unit:
+            return grad
+        return grad * (self.frame.scale[2] / self.frame.scale[:2])
+
+    def surface_points(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+        """World (M, 3) points of the surface above local (x, y) (or unit-square) points."""
+        pts = self._points(xy)
+        uv = pts if unit else self.frame.xy_to_unit(pts)
+        f, _ = self._eval_unit(np.ascontiguousarray(uv), False)
+        return self.frame.to_world(np.column_stack([uv, f]))
+
+    def normals(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+        """Return unit surface normals in world coordinates, (M, 3), facing +depth.
+
+        From the analytic gradient: ``n ~ (-dz/dx, -dz/dy, 1)`` in the local physical
+        frame, rotated to world.
+        """
+        pts = self._points(xy)
+        uv = pts if unit else self.frame.xy_to_unit(pts)
+        _, grad = self._eval_unit(np.ascontiguousarray(uv), True)
+        gp = grad * (self.frame.scale[2] / self.frame.scale[:2])
+        n = np.column_stack([-gp[:, 0], -gp[:, 1], np.ones(len(gp))])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        return n @ self.frame.rotation.T
+
+    # -- file -------------------------------------------------------------------------------
+    def save(self, path: str | os.PathLike, *, float32: bool = False,
+             inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
+        """Write a versioned ``.asrbf`` file atomically.
+
+        The file is a zip of ``.npy`` members (loadable with ``numpy.load``) with fixed
+        member dates, so the same network always gives the same bytes.
+
+        Parameters
+        ----------
+        path : path-like
+            Output file.
+        float32 : bool
+            Store the neuron parameters in single precision (half the size).
+        inputs : paths
+            Input files the output must not overwrite.
+        """
+        out = check_output_path(path, *inputs)
+        dt = np.float32 if float32 else np.float64
+        meta = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION,
+                "dtype": np.dtype(dt).name, "frame": self.frame.to_dict(),
+                "config": self.config.to_dict(), "info": self.info,
+                "log_counters": self.log.counters() if self.log else None}
+        members: dict[str, np.ndarray] = {
+            "meta": np.frombuffer(json.dumps(meta, sort_keys=True).encode(), dtype=np.uint8),
+            "a0": np.array([self.a0], dtype=np.float64),
+            "centers": self.centers.astype(dt),
+            "widths": self.widths.astype(dt),
+            "weights": self.weights.astype(dt),
+        }
+        if self.log is not None:
+            for name in FitLog._ARRAYS:
+                members[f"log_{name}"] = np.asarray(getattr(self.log, name))
+        with atomic_path(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
+            for name, arr in members.items():
+                buf = io.BytesIO()
+                np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
+                zi = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_DATE)
+                zi.compress_type = zipfile.ZIP_DEFLATED
+                zi.external_attr = 0o644 << 16
+                zf.writestr(zi, buf.getvalue())
+        return out
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Network:
+        """Read a ``.asrbf`` file written by :meth:`save`.
+
+        Raises
+        ------
+        NetworkFileError
+            Missing, unreadable, foreign, corrupt or version-mismatched file.
+        """
+        p = Path(path)
+        if not p.exists():
+            raise NetworkFileError(f"{p}: no such file")
+        if p.is_dir():
+            raise NetworkFileError(f"{p}: is a directory, not a network file")
+        try:
+            with zipfile.ZipFile(p) as zf:
+                names = set(zf.namelist())
+                if "meta.npy" not in names:
+                    raise NetworkFileError(f"{p}: not an asrbf network file (no metadata)")
+                arrays = {}
+                for name in names:
+                    if name.endswith(".npy"):
+                        with zf.open(name) as fh:
+                            arrays[name[:-4]] = np.lib.format.read_array(
+                                io.BytesIO(fh.read()), allow_pickle=False)
+        except NetworkFileError:
+            raise
+        except zipfile.BadZipFile:
+            raise NetworkFileError(f"{p}: not an asrbf network file (not a zip archive)") from None
+        except Exception as exc:  # corrupt member, truncated data, ...
+            raise NetworkFileError(f"{p}: corrupt network file ({exc})") from None
+        try:
+            meta = json.loads(bytes(arrays["meta"]).decode())
+        except Exception:
+            raise NetworkFileError(f"{p}: corrupt network file (unreadable metadata)") from None
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+            raise NetworkFileError(f"{p}: not an asrbf network file")
+        version = meta.get("format_version")
+        if version != FORMAT_VERSION:
+            raise NetworkFileError(
+                f"{p}: network file format version {version!r} is not supported "
+                f"(this asrbf-mesh reads version {FORMAT_VERSION})")
+        try:
+            log = None
+            if "log_step" in arrays:
+                counters = meta.get("log_counters") or {}
+                log = FitLog(*(arrays[f"log_{n}"] for n in FitLog._ARRAYS),
+                             **{k: int(v) for k, v in counters.items()})
+            a0 = np.asarray(arrays["a0"], dtype=np.float64).reshape(-1)
+            if a0.shape != (1,):
+                raise ValueError("a0 must hold one value")
+            return cls(float(a0[0]), arrays["centers"], arrays["widths"],
+                       arrays["weights"], Frame.from_dict(meta["frame"]),
+                       FitConfig.from_dict(meta["config"]), log, dict(meta.get("info") or {}))
+        except (KeyError, ValueError, TypeError, AsrbfError) as exc:
+            raise NetworkFileError(f"{p}: corrupt network file ({exc})") from None

@@ -1,0 +1,1 @@
+"""MeshLab-style filters over pymeshlab.MeshSet (see issue: meshlab_filter)."""
