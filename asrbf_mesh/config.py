@@ -118,7 +118,7 @@ class FitConfig:
     neighbourhood_factor: float = 1.5
     max_neighbours: int = 8
     measurement_noise: float = 0.01
-    process_noise: float = 1e-4
+    process_noise: float = 3e-5
     prior_variance: float = 1.0
     gd_rate: float = 0.05
     support: float = 3.5
