@@ -43,7 +43,8 @@ class FitConfig:
         D_max, the initial neuron separation distance (criterion 1).
     d_min : float or None
         D_min, the final separation ("neuron separation level"). ``None``: twice
-        the scan's sampling spacing, measured from the data (section 5.1).
+        the scan's sampling spacing measured from the data (section 5.1), but not
+        below E (see :func:`asrbf_mesh.learn.auto_d_min`).
     gamma : float
         Decay factor of the separation distance, eq. (4).
     decay : {"observation", "neurons"}

@@ -49,16 +49,15 @@ _CHUNK = 16_384
 _LOG_POINTS = 2_000
 
 
-D_MIN_FLOOR = 0.01
-
-
-def auto_d_min(spacing: float) -> float:
-    """Automatic D_min: twice the sampling spacing, at least 0.01, at most 0.2.
+def auto_d_min(spacing: float, error_threshold: float = 0.01) -> float:
+    """Automatic D_min: ``max(2 * spacing, E)``, at most 0.2 (unit square).
 
     Section 5.1 of the paper sets D_min to twice the uni-dimensional sampling
-    spacing, 0.01 for its 200 x 200 scans. Denser scans get the paper's 0.01 as a
-    floor: on the face map (2 x spacing = 0.0043) the finer separation added 37 %
-    more neurons for the same E-bar (BENCHMARKS.md, "D_min").
+    spacing: 0.01 for its 200 x 200 scans, where it equals the default E = 0.01.
+    On denser scans twice the spacing is finer than the detail an accuracy E asks
+    for: on the face map (2 x spacing = 0.0043, E = 0.01) it added 37 % more neurons
+    for the same E-bar, while at E = 0.003 the finer separation is what reaches
+    E-bar = 0.0010 (BENCHMARKS.md, "D_min"). Tying the floor to E keeps both.
 
     Examples
     --------
@@ -66,8 +65,10 @@ def auto_d_min(spacing: float) -> float:
     0.01
     >>> auto_d_min(1 / 50)
     0.04
+    >>> auto_d_min(0.002, 0.003)
+    0.004
     """
-    return float(min(max(2.0 * spacing, D_MIN_FLOOR), 0.2))
+    return float(min(max(2.0 * spacing, error_threshold), 0.2))
 
 
 def _pow2_at_most(v: float) -> int:
@@ -255,7 +256,7 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     n = hf.n_points
     if n < MIN_POINTS:
         raise ScanError(f"a fit needs at least {MIN_POINTS} points, got {n}")
-    d_min = cfg.d_min if cfg.d_min is not None else auto_d_min(hf.spacing)
+    d_min = cfg.d_min if cfg.d_min is not None else auto_d_min(hf.spacing, cfg.error_threshold)
     d_min = min(d_min, cfg.d_max)
     total = n * cfg.passes
     window = cfg.window

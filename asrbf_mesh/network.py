@@ -30,6 +30,37 @@ FORMAT_VERSION = 1
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member dates: same network, same bytes
 
 
+def eval_grid(centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
+              support: float) -> tuple:
+    """Build the static evaluation grid ``(support, lo, h, g, start, items, packed)``.
+
+    Cells are about the size of a median truncated support (at most 512 per axis)
+    over the unit square extended to every centre.
+    """
+    if len(widths):
+        lo = np.minimum(centers.min(axis=0), 0.0)
+        hi = np.maximum(centers.max(axis=0), 1.0)
+        cell = max(float(np.median(widths)) * support, float((hi - lo).max()) / 512)
+    else:
+        lo, hi, cell = np.zeros(2), np.ones(2), 1.0
+    g = max(1, int(np.ceil(float((hi - lo).max()) / cell)))
+    h = float((hi - lo).max()) / g
+    lo = np.ascontiguousarray(lo, dtype=np.float64)
+    start, items = _nk.build_grid(centers, widths, support, lo, h, g)
+    packed = _nk.pack_cells(centers, widths, weights, items)
+    return support, lo, h, g, start, items, packed
+
+
+def eval_unit(grid: tuple, uv: np.ndarray, a0: float, centers: np.ndarray, widths: np.ndarray,
+              weights: np.ndarray, want_grad: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Evaluate f (and optionally its gradient) at unit-square points through a grid."""
+    s, lo, h, g, start, items, packed = grid
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    if not want_grad:
+        return _nk.evaluate_values(uv, a0, packed, s, lo, h, g, start), np.zeros((0, 2))
+    return _nk.evaluate(uv, a0, centers, widths, weights, s, lo, h, g, start, items, True)
+
+
 @dataclass(frozen=True, eq=False)
 class FitLog:
     """Learning history sampled at a fixed stride (paper, Figs. 6 and 9).
@@ -188,27 +219,14 @@ class Network:
     # -- evaluation -------------------------------------------------------------------------
     def _grid_arrays(self) -> tuple:
         cached = self.__dict__.get("_grid")
-        if cached is not None:
-            return cached
-        s = self.config.support
-        if self.n_neurons:
-            lo = np.minimum(self.centers.min(axis=0), 0.0)
-            hi = np.maximum(self.centers.max(axis=0), 1.0)
-            # cells about the size of a typical (median) support, at most 512 per axis
-            cell = max(float(np.median(self.widths)) * s, (hi - lo).max() / 512)
-        else:
-            lo, hi, cell = np.zeros(2), np.ones(2), 1.0
-        g = max(1, int(np.ceil((hi - lo).max() / cell)))
-        h = float((hi - lo).max() / g)
-        start, items = _nk.build_grid(self.centers, self.widths, s, lo.astype(np.float64), h, g)
-        cached = (s, lo.astype(np.float64), h, g, start, items)
-        object.__setattr__(self, "_grid", cached)
+        if cached is None:
+            cached = eval_grid(self.centers, self.widths, self.weights, self.config.support)
+            object.__setattr__(self, "_grid", cached)
         return cached
 
     def _eval_unit(self, uv: np.ndarray, want_grad: bool) -> tuple[np.ndarray, np.ndarray]:
-        s, lo, h, g, start, items = self._grid_arrays()
-        return _nk.evaluate(uv, self.a0, self.centers, self.widths, self.weights, s, lo, h, g,
-                            start, items, want_grad)
+        return eval_unit(self._grid_arrays(), uv, self.a0, self.centers, self.widths,
+                         self.weights, want_grad)
 
     @staticmethod
     def _points(xy: np.ndarray) -> np.ndarray:

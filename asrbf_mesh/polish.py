@@ -20,14 +20,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
+from scipy.sparse.linalg import cg, spsolve
 
 from . import _network_kernels as _nk
+from .network import eval_grid, eval_unit
 
 __all__ = ["PolishResult", "polish_weights", "polish_full", "design_matrix"]
 
 _SIGMA_RANGE = (1e-5, 2.0)
 _CENTRE_BOX = (-0.25, 1.25)
+_CG_ITERATIONS = 300
 
 
 @dataclass(frozen=True)
@@ -41,16 +43,6 @@ class PolishResult:
     ebar_before: float
     ebar_after: float
     iterations: int
-
-
-def _grid(centers: np.ndarray, widths: np.ndarray, support: float) -> tuple:
-    lo = np.minimum(centers.min(axis=0), 0.0)
-    hi = np.maximum(centers.max(axis=0), 1.0)
-    cell = max(float(np.median(widths)) * support, (hi - lo).max() / 512)
-    g = max(1, int(np.ceil((hi - lo).max() / cell)))
-    h = float((hi - lo).max() / g)
-    start, items = _nk.build_grid(centers, widths, support, lo, h, g)
-    return lo, h, g, start, items
 
 
 def design_matrix(xy: np.ndarray, centers: np.ndarray, widths: np.ndarray,
@@ -68,22 +60,17 @@ def design_matrix(xy: np.ndarray, centers: np.ndarray, widths: np.ndarray,
     [[1.0, 1.0], [1.0, 0.0]]
     """
     pts = np.ascontiguousarray(xy, dtype=np.float64)
-    lo, h, g, start, items = _grid(centers, widths, support)
-    rows, cols, vals = _nk.design_rows(pts, centers, widths, weights, support, lo, h, g, start,
-                                       items, full)
+    _, lo, h, g, start, items, _ = eval_grid(centers, widths, weights, support)
+    indptr, cols, vals = _nk.design_rows(pts, centers, widths, weights, support, lo, h, g,
+                                         start, items, full)
     n = len(pts)
     ncol = 1 + (4 if full else 1) * len(widths)
-    rows = np.concatenate([np.arange(n), rows])
-    cols = np.concatenate([np.zeros(n, np.int64), cols + 1])
-    vals = np.concatenate([np.ones(n), vals])
-    return sp.csr_matrix((vals, (rows, cols)), shape=(n, ncol))
+    return sp.csr_matrix((vals, cols, indptr), shape=(n, ncol))
 
 
 def _predict(xy, a0, centers, widths, weights, support) -> np.ndarray:
-    lo, h, g, start, items = _grid(centers, widths, support)
-    f, _ = _nk.evaluate(np.ascontiguousarray(xy), a0, centers, widths, weights, support, lo, h,
-                        g, start, items, False)
-    return f
+    grid = eval_grid(centers, widths, weights, support)
+    return eval_unit(grid, xy, a0, centers, widths, weights)[0]
 
 
 def _solve(A: sp.csr_matrix, rhs: np.ndarray, damp: np.ndarray) -> np.ndarray:
@@ -139,8 +126,9 @@ def polish_full(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
                 iterations: int = 4, ridge: float = 1e-4) -> PolishResult:
     """Weights by least squares, then Levenberg-Marquardt over every parameter.
 
-    Parameters are ``(a0, a_k, log sigma_k, u_k)``; each iteration solves the damped
-    normal equations ``(J'J + mu D + lam S) dp = J'r - lam S (p - p_learned)`` with
+    Parameters are ``(a0, a_k, log sigma_k, u_k)``; each iteration solves (inexactly,
+    by preconditioned conjugate gradients) the damped normal equations
+    ``(J'J + mu D + lam S) dp = J'r - lam S (p - p_learned)`` with
     ``D = diag(J'J)`` and ``S = diag(1, 1, sigma^2... )`` scaled as the EKF prior; a
     step is kept only if it lowers the penalized squared error, otherwise ``mu``
     grows tenfold.
@@ -181,12 +169,15 @@ def polish_full(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
         prior = lam / scale**2
         if base is None:
             base = float(r @ r + np.sum(prior * (p - ref) ** 2))
-        rhs_extra = prior * (p - ref)
+        rhs = J.T @ r - prior * (p - ref)
+        jtj = (J.T @ J).tocsr()
         improved = False
         for _try in range(6):
-            jtj = (J.T @ J).tocsc()
-            mat = jtj + sp.diags(mu * np.maximum(diag, 1e-12) + prior, format="csc")
-            dp = spsolve(mat, J.T @ r - rhs_extra)
+            # inexact Newton step: Jacobi-preconditioned conjugate gradients
+            shift = mu * np.maximum(diag, 1e-12) + prior
+            mat = jtj + sp.diags(shift, format="csr")
+            pre = sp.diags(1.0 / (diag + shift), format="csr")
+            dp, _ = cg(mat, rhs, M=pre, maxiter=_CG_ITERATIONS, rtol=1e-6)
             if not np.all(np.isfinite(dp)):
                 mu *= 10.0
                 continue

@@ -1,0 +1,203 @@
+"""Batch polish of a learned network: sparse design matrix, weights LS, full LM."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import asrbf_mesh as am
+from asrbf_mesh.config import FitConfig
+from asrbf_mesh.frame import to_height_field
+from asrbf_mesh.learn import learn
+from asrbf_mesh.polish import design_matrix, polish_full, polish_weights
+
+
+@pytest.fixture(scope="module")
+def learned(syn):
+    """A height field of Franke's function (1,600 points) and its sequential network."""
+    hf = to_height_field(syn.franke_points(40))
+    return hf, learn(hf, FitConfig(passes=1), seed=0)
+
+
+def mean_abs(xy, z, a0, centers, widths, weights, support=3.5) -> float:
+    A = design_matrix(xy, centers, widths, weights, support)
+    return float(np.mean(np.abs(A @ np.concatenate([[a0], weights]) - z)))
+
+
+# ----------------------------------------------------------------------------- design matrix
+
+
+def dense_design(xy, centers, widths, weights, support, full):
+    dx = xy[:, None, 0] - centers[None, :, 0]
+    dy = xy[:, None, 1] - centers[None, :, 1]
+    d2 = dx * dx + dy * dy
+    s2 = widths * widths
+    phi = np.where(d2 < support * support * s2, np.exp(-d2 / s2), 0.0)
+    if not full:
+        return np.column_stack([np.ones(len(xy)), phi])
+    ap = weights * phi
+    cols = np.stack([phi, 2 * ap * d2 / s2, 2 * ap * dx / s2, 2 * ap * dy / s2], axis=2)
+    return np.column_stack([np.ones(len(xy)), cols.reshape(len(xy), -1)])
+
+
+def random_net(seed: int, k: int = 60, widths=(0.005, 0.3)):
+    rng = np.random.default_rng(seed)
+    centers = rng.uniform(-0.25, 1.25, (k, 2))
+    w = np.exp(rng.uniform(np.log(widths[0]), np.log(widths[1]), k))
+    a = rng.normal(0, 0.3, k)
+    xy = np.concatenate([rng.uniform(-0.3, 1.3, (400, 2)),
+                         centers + rng.normal(size=(k, 2)) * w[:, None]])
+    return xy, centers, w, a
+
+
+@pytest.mark.parametrize("full", [False, True])
+def test_design_matrix_matches_dense_brute_force(full: bool) -> None:
+    xy, centers, widths, weights = random_net(1)
+    A = design_matrix(xy, centers, widths, weights, 3.5, full=full)
+    assert A.shape == (len(xy), 1 + (4 if full else 1) * len(widths))
+    ref = dense_design(xy, centers, widths, weights, 3.5, full)
+    np.testing.assert_allclose(A.toarray(), ref, rtol=1e-12, atol=1e-14)
+    # sparse: only the truncated supports are stored (plus the bias column)
+    per = 4 if full else 1
+    assert A.nnz == len(xy) + per * int(np.count_nonzero(ref[:, 1::per]))
+    assert A.nnz < 0.5 * A.shape[0] * A.shape[1]
+
+
+def test_full_design_matrix_is_the_jacobian() -> None:
+    # wide truncation: smooth, so central differences of f must match the columns
+    xy, centers, widths, weights = random_net(2, k=15, widths=(0.05, 0.3))
+    support = 9.0
+    J = design_matrix(xy, centers, widths, weights, support, full=True).toarray()
+
+    def f(a0, c, w, a):
+        return design_matrix(xy, c, w, a, support) @ np.concatenate([[a0], a])
+
+    h = 1e-6
+    for k in (0, 7, 14):
+        for col, name in enumerate(("a", "log_sigma", "ux", "uy")):
+            c, w, a = centers.copy(), widths.copy(), weights.copy()
+            c2, w2, a2 = centers.copy(), widths.copy(), weights.copy()
+            if name == "a":
+                a[k] += h
+                a2[k] -= h
+            elif name == "log_sigma":
+                w[k] *= np.exp(h)
+                w2[k] *= np.exp(-h)
+            else:
+                c[k, col - 2] += h
+                c2[k, col - 2] -= h
+            fd = (f(0.0, c, w, a) - f(0.0, c2, w2, a2)) / (2 * h)
+            np.testing.assert_allclose(J[:, 1 + 4 * k + col], fd, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(J[:, 0], 1.0)
+
+
+# ----------------------------------------------------------------------------- weights
+
+
+def test_polish_weights_improves_the_sequential_network(learned) -> None:
+    hf, st = learned
+    before = mean_abs(hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights)
+    pr = polish_weights(hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5)
+    assert pr.ebar_before == pytest.approx(before, rel=1e-12)
+    # measured: 0.0040 -> 0.0022
+    assert pr.ebar_after < 0.8 * pr.ebar_before
+    assert pr.ebar_after == pytest.approx(
+        mean_abs(hf.xy, hf.z, pr.a0, pr.centers, pr.widths, pr.weights), rel=1e-12)
+    # structure untouched, only a0 and the weights move
+    np.testing.assert_array_equal(pr.centers, st.centers)
+    np.testing.assert_array_equal(pr.widths, st.widths)
+    assert not np.array_equal(pr.weights, st.weights)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_polish_weights_never_increases_ebar(syn, seed: int) -> None:
+    hf = to_height_field(syn.franke_points(30, seed=seed))
+    xy, centers, widths, weights = random_net(seed + 10)
+    for ridge in (1e-9, 1e-4, 1.0):
+        pr = polish_weights(hf.xy, hf.z, 0.2, centers, widths, weights, 3.5, ridge)
+        assert pr.ebar_after <= pr.ebar_before
+
+
+def test_polish_weights_keeps_the_network_when_least_squares_is_worse() -> None:
+    # one outlier: the least-squares bias lowers the squared error but doubles E-bar
+    xy = np.random.default_rng(0).random((100, 2))
+    z = np.zeros(100)
+    z[0] = 100.0
+    centers, widths, weights = np.array([[5.0, 5.0]]), np.array([0.01]), np.array([0.3])
+    pr = polish_weights(xy, z, 0.0, centers, widths, weights, 3.5, 1e-9)
+    assert pr.iterations == 0
+    assert pr.ebar_after == pr.ebar_before == pytest.approx(1.0)
+    assert pr.a0 == 0.0 and pr.weights is weights
+
+
+@pytest.mark.xfail(reason="BUG: polish.py polish_weights with ridge=0 (allowed by FitConfig."
+                          "polish_ridge >= 0) solves singular normal equations when a neuron "
+                          "has no data under it; spsolve warns and returns NaN, and the whole "
+                          "polish is silently skipped", strict=True)
+def test_polish_weights_without_ridge_tolerates_a_neuron_without_data(learned) -> None:
+    hf, st = learned
+    centers = np.vstack([st.centers, [[1.2, 1.2]]])  # no point within 3.5 sigma
+    widths = np.append(st.widths, 0.01)
+    weights = np.append(st.weights, 0.1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pr = polish_weights(hf.xy, hf.z, st.a0, centers, widths, weights, 3.5, ridge=0.0)
+    assert pr.ebar_after < 0.8 * pr.ebar_before
+
+
+def test_polish_weights_recovers_exact_weights() -> None:
+    # data generated by the network itself, weights perturbed: least squares restores them
+    xy, centers, widths, weights = random_net(4, k=20, widths=(0.05, 0.2))
+    z = design_matrix(xy, centers, widths, weights, 3.5) @ np.concatenate([[0.1], weights])
+    pr = polish_weights(xy, z, 0.0, centers, widths, weights * 0.5, 3.5, ridge=0.0)
+    # neurons without data under them are left where they were
+    A = design_matrix(xy, centers, widths, weights, 3.5).toarray()
+    seen = np.count_nonzero(A[:, 1:] > 1e-3, axis=0) >= 3
+    assert seen.sum() > 10
+    np.testing.assert_allclose(pr.weights[seen], weights[seen], rtol=1e-6, atol=1e-8)
+    assert pr.a0 == pytest.approx(0.1, abs=1e-8)
+    assert pr.ebar_after < 1e-9
+
+
+# ----------------------------------------------------------------------------- full
+
+
+def test_polish_full_beats_polish_weights(learned) -> None:
+    hf, st = learned
+    args = (hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5)
+    pw = polish_weights(*args)
+    pf = polish_full(*args, iterations=4)
+    assert pf.ebar_before == pytest.approx(pw.ebar_before, rel=1e-12)
+    # measured: sequential 0.0040, weights 0.0022, full 0.0009
+    assert pf.ebar_after < 0.9 * pw.ebar_after
+    assert pf.iterations >= 2
+    assert np.all(np.isfinite(pf.centers)) and np.all(np.isfinite(pf.weights))
+    assert np.all((pf.widths >= 1e-5) & (pf.widths <= 2.0))
+    assert np.all((pf.centers >= -0.25) & (pf.centers <= 1.25))
+    assert pf.ebar_after == pytest.approx(
+        mean_abs(hf.xy, hf.z, pf.a0, pf.centers, pf.widths, pf.weights), rel=1e-9)
+
+
+def test_polish_full_with_zero_iterations_is_polish_weights(learned) -> None:
+    hf, st = learned
+    args = (hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5)
+    pw = polish_weights(*args)
+    pf = polish_full(*args, iterations=0)
+    assert pf.iterations == 1
+    np.testing.assert_allclose(pf.weights, pw.weights, rtol=1e-12)
+    assert pf.ebar_after == pytest.approx(pw.ebar_after, rel=1e-9)
+
+
+def test_fit_polish_modes(syn) -> None:
+    pts = syn.franke_points(40)
+    nets = {p: am.fit(pts, seed=0, polish=p, passes=1, progress=False)
+            for p in ("none", "weights", "full")}
+    seq = nets["none"].info["ebar"]
+    for net in nets.values():
+        assert net.info["ebar_sequential"] == pytest.approx(seq, rel=1e-12)
+        assert net.config.polish in ("none", "weights", "full")
+    assert nets["full"].info["ebar"] < nets["weights"].info["ebar"] < seq
+    np.testing.assert_array_equal(nets["weights"].centers, nets["none"].centers)
+    assert nets["weights"].info["polish_seconds"] >= 0
