@@ -121,7 +121,3 @@ def franke_net(franke_points: np.ndarray) -> am.Network:
     """The default fit (seed 0) of :func:`franke_points`, shared by many tests."""
     return am.fit(franke_points, seed=0, progress=False)
 
-
-@pytest.fixture(scope="session")
-def face_scan() -> am.Scan:
-    return am.load_scan(am.face_map_path())
