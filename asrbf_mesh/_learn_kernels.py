@@ -342,6 +342,23 @@ def _heap_pop(hk, hs, hg, size):
     return size
 
 
+@njit(cache=True)
+def _heap_push_checked(hk, hs, hg, size, key, slot, gen, alive, gens):
+    """Push; when the arrays are full, first drop the stale entries of removed neurons."""
+    if size == hk.shape[0]:
+        n = 0
+        for i in range(size):
+            if alive[hs[i]] and gens[hs[i]] == hg[i]:
+                hk[n] = hk[i]
+                hs[n] = hs[i]
+                hg[n] = hg[i]
+                n += 1
+        size = 0
+        for i in range(n):  # re-heapify by pushing in place
+            size = _heap_push(hk, hs, hg, size, hk[i], hs[i], hg[i])
+    return _heap_push(hk, hs, hg, size, key, slot, gen)
+
+
 # --- EKF helpers --------------------------------------------------------------------------
 
 
@@ -542,7 +559,8 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
             _index_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l_prv,
                           l_cell, l_lev, lev_off, lev_count)
             if prune_mode == PRUNE_LITERAL:
-                st[ST_HEAP] = _heap_push(hk, hs, hg, st[ST_HEAP], t + pwin, s, gen[s])
+                st[ST_HEAP] = _heap_push_checked(hk, hs, hg, st[ST_HEAP], t + pwin, s, gen[s],
+                                                 alive, gen)
             if nparam_full > 0:
                 b = 1 + 4 * s
                 for a_ in range(4):
@@ -727,7 +745,8 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
                     continue
                 due = last_active[s] + pwin
                 if due > t:
-                    st[ST_HEAP] = _heap_push(hk, hs, hg, st[ST_HEAP], due, s, gg)
+                    st[ST_HEAP] = _heap_push_checked(hk, hs, hg, st[ST_HEAP], due, s, gg,
+                                                     alive, gen)
                 else:
                     st[ST_PRUNED] += 1
                     _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head,

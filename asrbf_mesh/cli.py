@@ -99,7 +99,8 @@ def _fit_summary(net: Network) -> dict[str, Any]:
     }
 
 
-def _print_summary(s: dict[str, Any], out=sys.stdout) -> None:
+def _print_summary(s: dict[str, Any], out=None) -> None:
+    out = out or sys.stdout
     rows = [
         ("points N", f"{s['n_points']:,}"),
         ("neurons K", f"{s['n_neurons']:,}  (added {s['added']:,}, pruned {s['pruned']:,})"),
@@ -242,9 +243,10 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``asrbf`` command; returns the exit code."""
     args = build_parser().parse_args(argv)
-    warnings.showwarning = _show_warning
     try:
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return int(args.func(args))
     except AsrbfError as exc:
         print(f"asrbf: error: {exc}", file=sys.stderr)
         return 2

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -129,39 +130,49 @@ class FitConfig:
     polish_ridge: float = 1e-4
 
     def __post_init__(self) -> None:
-        def positive(name: str) -> None:
+        def real(name: str, *, lo: float = 0.0, lo_open: bool = True, hi: float = math.inf,
+                 hi_open: bool = True, optional: bool = False) -> None:
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ConfigError(f"{name} must be a positive finite number, got {v!r}")
+            if v is None and optional:
+                return
+            if math.isinf(hi):
+                want = "a positive finite number" if lo_open else f"a finite number >= {lo:g}"
+            else:
+                want = (f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}"
+                        f"{')' if hi_open else ']'}")
+            ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+            if ok:
+                v = float(v)
+                ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+            if not ok:
+                raise ConfigError(f"{name} must be {want}, got {v!r}")
+            object.__setattr__(self, name, v)
+
+        def integer(name: str, *, lo: int, optional: bool = False) -> None:
+            v = getattr(self, name)
+            if v is None and optional:
+                return
+            if not isinstance(v, numbers.Integral) or isinstance(v, bool) or v < lo:
+                raise ConfigError(f"{name} must be an integer >= {lo}"
+                                  f"{' or None' if optional else ''}, got {v!r}")
+            object.__setattr__(self, name, int(v))
 
         for name in ("error_threshold", "rms_threshold", "d_max", "measurement_noise",
                      "prior_variance", "gd_rate", "support", "neighbourhood_factor"):
-            positive(name)
-        if self.d_min is not None:
-            positive("d_min")
-            if self.d_min > self.d_max:
-                raise ConfigError(f"d_min ({self.d_min}) must not exceed d_max ({self.d_max})")
-        for name in ("gamma", "psi"):
-            v = getattr(self, name)
-            if not (0.0 < v < 1.0 or (name == "psi" and v == 1.0)):
-                raise ConfigError(f"{name} must lie in (0, 1), got {v!r}")
-        if not (0.0 <= self.prune_threshold < 1.0):
-            raise ConfigError(f"prune_threshold must lie in [0, 1), got {self.prune_threshold!r}")
-        if not (self.process_noise >= 0 and math.isfinite(self.process_noise)):
-            raise ConfigError(f"process_noise must be >= 0, got {self.process_noise!r}")
-        if not (self.polish_ridge >= 0 and math.isfinite(self.polish_ridge)):
-            raise ConfigError(f"polish_ridge must be >= 0, got {self.polish_ridge!r}")
+            real(name)
+        real("d_min", optional=True)
+        real("gamma", hi=1.0)
+        real("psi", hi=1.0, hi_open=False)
+        real("prune_threshold", lo_open=False, hi=1.0)
+        real("process_noise", lo_open=False)
+        real("polish_ridge", lo_open=False)
+        if self.d_min is not None and self.d_min > self.d_max:
+            raise ConfigError(f"d_min ({self.d_min}) must not exceed d_max ({self.d_max})")
         for name in ("window", "passes", "max_neighbours"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 1):
-                raise ConfigError(f"{name} must be an integer >= 1, got {v!r}")
+            integer(name, lo=1)
         for name in ("prune_window", "max_neurons"):
-            v = getattr(self, name)
-            if v is not None and not (isinstance(v, int) and v >= 1):
-                raise ConfigError(f"{name} must be an integer >= 1 or None, got {v!r}")
-        if not (isinstance(self.polish_iterations, int) and self.polish_iterations >= 0):
-            raise ConfigError(
-                f"polish_iterations must be an integer >= 0, got {self.polish_iterations!r}")
+            integer(name, lo=1, optional=True)
+        integer("polish_iterations", lo=0)
         for name, allowed in (("update", UPDATES), ("pruning", PRUNINGS), ("decay", DECAYS),
                               ("polish", POLISHES)):
             v = getattr(self, name)

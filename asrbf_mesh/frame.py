@@ -17,7 +17,8 @@ from scipy.spatial import cKDTree
 
 from .errors import ScanError
 
-__all__ = ["Frame", "HeightField", "HeightFieldWarning", "to_height_field", "VIEW_AXES"]
+__all__ = ["Frame", "HeightField", "HeightFieldWarning", "to_height_field", "fold_fraction",
+           "sampling_spacing", "VIEW_AXES"]
 
 ViewAxis = Literal["z", "x", "y", "pca"]
 VIEW_AXES = ("z", "x", "y", "pca")
@@ -146,7 +147,7 @@ def sampling_spacing(xy: np.ndarray, *, max_samples: int = 50_000, seed: int = 0
     Examples
     --------
     >>> g = np.stack(np.meshgrid(np.arange(5.0), np.arange(4.0)), -1).reshape(-1, 2)
-    >>> float(sampling_spacing(g / 100))
+    >>> round(sampling_spacing(g / 100), 12)
     0.01
     """
     tree = cKDTree(xy)
@@ -164,22 +165,32 @@ def sampling_spacing(xy: np.ndarray, *, max_samples: int = 50_000, seed: int = 0
     return float(np.median(d))
 
 
-def _height_field_violation(xy: np.ndarray, z: np.ndarray, spacing: float) -> float:
-    """Fraction of occupied xy cells (2 x spacing) whose depth range exceeds 0.1."""
-    cell = 2.0 * spacing
-    ij = np.floor(xy / cell).astype(np.int64)
-    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    order = np.argsort(key, kind="stable")
-    k = key[order]
-    zz = z[order]
-    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
-    zmax = np.maximum.reduceat(zz, starts)
-    zmin = np.minimum.reduceat(zz, starts)
-    counts = np.diff(np.r_[starts, len(k)])
-    multi = counts > 1
-    if not np.any(multi):
-        return 0.0
-    return float(np.mean((zmax - zmin)[multi] > 0.1))
+def fold_fraction(local: np.ndarray, *, max_slope: float = 20.0, k: int = 6,
+                  max_samples: int = 50_000, seed: int = 0) -> float:
+    """Fraction of points that sit on a fold of the surface along the depth axis.
+
+    A point is on a fold when one of its ``k`` nearest neighbours in (x, y) lies at a
+    depth that no plausible surface slope explains: ``|dz| > max_slope * |dxy|`` (an
+    87 degree wall) and ``|dz|`` above 2 % of the xy extent. Slopes are taken in
+    physical units, so measurement noise on a flat scan does not count, while the
+    front and back of an object seen through each other do.
+
+    Parameters
+    ----------
+    local : (N, 3) array
+        Points in the view frame, physical units, depth last.
+    """
+    xy = local[:, :2]
+    z = local[:, 2]
+    extent = float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0)))
+    tree = cKDTree(xy)
+    idx = np.arange(len(xy))
+    if len(xy) > max_samples:
+        idx = np.random.default_rng(seed).choice(len(xy), max_samples, replace=False)
+    d, nb = tree.query(xy[idx], k=min(k + 1, len(xy)))
+    dz = np.abs(z[nb[:, 1:]] - z[idx, None])
+    wall = (dz > max_slope * d[:, 1:]) & (dz > 0.02 * extent)
+    return float(np.mean(wall.any(axis=1)))
 
 
 def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
@@ -193,9 +204,8 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
     view_axis : {"z", "x", "y", "pca"}
         Depth direction: a world axis, or the smallest principal axis.
     warn_fraction : float
-        Emit :class:`HeightFieldWarning` when more than this fraction of the
-        occupied xy cells hold points whose depths differ by more than 10 % of the
-        depth range (the data then folds over itself in this frame).
+        Emit :class:`HeightFieldWarning` when more than this fraction of the points
+        lie on a fold of the surface in this frame (see :func:`fold_fraction`).
 
     Returns
     -------
@@ -238,11 +248,11 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
     xy = np.ascontiguousarray(np.clip(unit[:, :2], 0.0, 1.0))
     z = np.ascontiguousarray(np.clip(unit[:, 2], 0.0, 1.0))
     spacing = sampling_spacing(xy)
-    bad = _height_field_violation(xy, z, spacing)
+    bad = fold_fraction(local)
     if bad > warn_fraction:
         warnings.warn(
-            f"{100 * bad:.0f}% of the occupied xy cells hold points whose depths differ by more "
-            f"than 10% of the depth range: the data is not a height field along the "
-            f"{view_axis!r} axis; try --view-axis pca or another axis",
+            f"{100 * bad:.0f}% of the points lie where the surface folds over itself along the "
+            f"{view_axis!r} axis (several depths at one x, y): the data is not a height field "
+            "in this frame; try --view-axis pca or another axis",
             HeightFieldWarning, stacklevel=2)
     return HeightField(xy, z, frame, spacing)

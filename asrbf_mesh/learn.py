@@ -47,6 +47,7 @@ _CENTRE_BOX = (-0.25, 1.25)
 _SIGMA_RANGE = (1e-5, 2.0)
 _CHUNK = 16_384
 _LOG_POINTS = 2_000
+_GEKF_MAX = 2_000
 
 
 def auto_d_min(spacing: float, error_threshold: float = 0.01) -> float:
@@ -179,7 +180,7 @@ class _State:
             if status == _lk.DONE:
                 return
             if status == _lk.NEED_SLOTS:
-                self._alloc(2 * self.cap)
+                self._alloc(min(2 * self.cap, _GEKF_MAX) if self.gekf else 2 * self.cap)
             else:  # NEED_LOG: cannot happen with the precomputed size; be safe
                 for name in ("log_t", "log_k", "log_rms", "log_sig", "log_amp"):
                     arr = getattr(self, name)
@@ -249,8 +250,11 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     ------
     ScanError
         Fewer than :data:`MIN_POINTS` points.
-    FitError
-        Learning produced no neuron.
+
+    Notes
+    -----
+    A flat scan (every residual within E of the bias) gives a network with no
+    neuron, only the bias a0: a valid result.
     """
     cfg = config or FitConfig()
     n = hf.n_points
@@ -276,9 +280,7 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
                 tick(len(chunk))
     seconds = time.perf_counter() - t0
     st = state.st
-    alive = np.flatnonzero(state.alive[: st[_lk.ST_SLOTS]])
-    if alive.size == 0:
-        raise FitError("learning produced no neuron (is the scan flat? lower error_threshold)")
+    alive = np.flatnonzero(state.alive[: st[_lk.ST_SLOTS]])  # may be empty: a flat scan
     nl = int(st[_lk.ST_NLOG])
     log = FitLog(state.log_t[:nl].copy(), state.log_k[:nl].copy(), state.log_rms[:nl].copy(),
                  state.log_sig[:nl].copy(), state.log_amp[:nl].copy(),
@@ -330,7 +332,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     ScanError
         Unusable points (too few, NaN, zero x or y extent).
     FitError
-        Learning produced no neuron.
+        The GEKF updater would need more than 2,000 neurons.
 
     Examples
     --------

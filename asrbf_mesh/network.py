@@ -28,6 +28,8 @@ __all__ = ["Network", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
 FORMAT_NAME = "asrbf-network"
 FORMAT_VERSION = 1
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member dates: same network, same bytes
+# wall-clock figures stay in memory only: the same seed must give the same file
+VOLATILE_INFO = ("fit_seconds", "learn_seconds", "polish_seconds", "us_per_step")
 
 
 def eval_grid(centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
@@ -157,7 +159,11 @@ class Network:
     info: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        c = np.array(self.centers, dtype=np.float64).reshape(-1, 2)
+        c = np.array(self.centers, dtype=np.float64)
+        if c.size == 0:
+            c = c.reshape(0, 2)
+        if c.ndim != 2 or c.shape[1] != 2:
+            raise ValueError(f"centers must have shape (K, 2), got {c.shape}")
         k = len(c)
         w = np.array(self.widths, dtype=np.float64).reshape(-1)
         a = np.array(self.weights, dtype=np.float64).reshape(-1)
@@ -296,7 +302,8 @@ class Network:
         """Write a versioned ``.asrbf`` file atomically.
 
         The file is a zip of ``.npy`` members (loadable with ``numpy.load``) with fixed
-        member dates, so the same network always gives the same bytes.
+        member dates and without the timings of ``info`` (:data:`VOLATILE_INFO`), so the
+        same network always gives the same bytes.
 
         Parameters
         ----------
@@ -311,7 +318,8 @@ class Network:
         dt = np.float32 if float32 else np.float64
         meta = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION,
                 "dtype": np.dtype(dt).name, "frame": self.frame.to_dict(),
-                "config": self.config.to_dict(), "info": self.info,
+                "config": self.config.to_dict(),
+                "info": {k: v for k, v in self.info.items() if k not in VOLATILE_INFO},
                 "log_counters": self.log.counters() if self.log else None}
         members: dict[str, np.ndarray] = {
             "meta": np.frombuffer(json.dumps(meta, sort_keys=True).encode(), dtype=np.uint8),

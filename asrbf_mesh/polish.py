@@ -30,6 +30,7 @@ __all__ = ["PolishResult", "polish_weights", "polish_full", "design_matrix"]
 _SIGMA_RANGE = (1e-5, 2.0)
 _CENTRE_BOX = (-0.25, 1.25)
 _CG_ITERATIONS = 300
+_RIDGE_FLOOR = 1e-10  # keeps the normal equations regular when a neuron has no data under it
 
 
 @dataclass(frozen=True)
@@ -109,7 +110,7 @@ def polish_weights(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray
     w0 = np.concatenate([[a0], weights])
     before = float(np.mean(np.abs(A @ w0 - z)))
     diag = np.asarray(A.multiply(A).sum(axis=0)).ravel()
-    lam = ridge * float(diag.mean())
+    lam = max(ridge, _RIDGE_FLOOR) * float(diag.mean())
     # solve for the change: (A'A + lam) dw = A'(z - A w0)
     dw = _solve(A, z - A @ w0, np.full(len(w0), lam))
     w = w0 + dw
@@ -165,7 +166,7 @@ def polish_full(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
     for _ in range(iterations):
         J = design_matrix(xy, cen, wid, wts, support, full=True)
         diag = np.asarray(J.multiply(J).sum(axis=0)).ravel()
-        lam = ridge * float(diag.mean())
+        lam = max(ridge, _RIDGE_FLOOR) * float(diag.mean())
         prior = lam / scale**2
         if base is None:
             base = float(r @ r + np.sum(prior * (p - ref) ** 2))

@@ -83,7 +83,8 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     resolution : int, optional
         Number of samples along the longer side of the scan's xy extent.
     spacing_abs : float, optional
-        Grid spacing in scan units (instead of ``resolution``). Default: the
+        Grid spacing in scan units (instead of ``resolution``); each axis takes the
+        nearest whole number of steps, so the grid spans the extent exactly. Default: the
         scan's own sampling spacing if known, else 200 samples along the longer side.
     footprint : Scan or (N, 3) array, optional
         Keep only the grid cells that hold scan data (the scan's footprint);
@@ -133,13 +134,13 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         raise AsrbfError(f"margin_rel must lie in [0, 10), got {margin_rel!r}")
     lo = frame.offset[:2] - margin_rel * span
     hi = frame.offset[:2] + (1 + margin_rel) * span
-    nx = int(np.floor((hi[0] - lo[0]) / step + 1e-9)) + 1
-    ny = int(np.floor((hi[1] - lo[1]) / step + 1e-9)) + 1
-    nx, ny = max(nx, 2), max(ny, 2)
+    # per axis: the nearest whole number of steps, so the grid ends exactly on the border
+    nx = max(int(round((hi[0] - lo[0]) / step)) + 1, 2)
+    ny = max(int(round((hi[1] - lo[1]) / step)) + 1, 2)
     if nx * ny > 50_000_000:
         raise AsrbfError(f"a {nx} x {ny} grid is too large; raise spacing_abs or lower resolution")
-    gx = lo[0] + step * np.arange(nx)
-    gy = lo[1] + step * np.arange(ny)
+    gx = np.linspace(lo[0], hi[0], nx)
+    gy = np.linspace(lo[1], hi[1], ny)
     xy = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)
     keep = None
     if footprint is not None:
@@ -152,7 +153,9 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
             from .frame import sampling_spacing
 
             spacing = sampling_spacing(uv_scan)
-        centres = np.stack(np.meshgrid(gx[:-1] + step / 2, gy[:-1] + step / 2), -1).reshape(-1, 2)
+        mid_x = 0.5 * (gx[:-1] + gx[1:])
+        mid_y = 0.5 * (gy[:-1] + gy[1:])
+        centres = np.stack(np.meshgrid(mid_x, mid_y), -1).reshape(-1, 2)
         keep = footprint_mask(uv_scan, frame.xy_to_unit(centres), spacing).reshape(ny - 1, nx - 1)
     faces = grid_faces(nx, ny, keep)
     used = np.unique(faces)

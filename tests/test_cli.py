@@ -101,10 +101,6 @@ def test_fit_text_summary(capsys, scan_file: Path, tmp_path: Path) -> None:
     assert err == ""
 
 
-@pytest.mark.xfail(reason="BUG: cli.py _print_summary(s, out=sys.stdout) binds the stdout of "
-                          "import time as a default argument, so the summary table ignores a "
-                          "later redirection of sys.stdout (contextlib.redirect_stdout, capsys)",
-                   strict=True)
 def test_fit_text_summary_follows_sys_stdout(capsys, scan_file: Path, tmp_path: Path) -> None:
     code, stdout, _ = run(capsys, "fit", scan_file, "-o", tmp_path / "n.asrbf", "--passes", "1")
     assert code == 0
@@ -120,12 +116,9 @@ def test_fit_reports_height_field_warning(capsys, syn, tmp_path: Path) -> None:
                        "--passes", "1", "--polish", "none")
     assert code == 0
     assert err.startswith("asrbf: warning: ")
-    assert "not a height field along the 'z' axis" in err
+    assert "not a height field" in err and "'z' axis" in err
 
 
-@pytest.mark.xfail(reason="BUG: cli.py main() assigns warnings.showwarning = _show_warning "
-                          "and never restores it: after an in-process call every warning of "
-                          "the host program is printed as 'asrbf: warning: ...'", strict=True)
 def test_main_restores_warning_display(capsys, net_file: Path) -> None:
     def mine(*args, **kwargs) -> None:
         pass
@@ -209,7 +202,7 @@ def test_fit_user_errors(capsys, scan_file: Path, tmp_path: Path, case: str) -> 
         out.write_bytes(b"precious")
         argv, match = ["fit", out, "-o", out], "unknown scan format"
     else:
-        argv, match = ["fit", scan_file, "-o", out, "--gamma", "1.5"], "gamma must lie in"
+        argv, match = ["fit", scan_file, "-o", out, "--gamma", "1.5"], "gamma must be a number in"
     before = sorted(p.name for p in tmp_path.iterdir())
     code, stdout, err = run(capsys, *argv)
     assert_user_error(code, stdout, err, match)
@@ -275,7 +268,7 @@ def without_timings(members: dict[str, bytes]) -> dict:
     out: dict = dict(members)
     meta = json.loads(bytes(np.lib.format.read_array(io.BytesIO(members["meta.npy"]))).decode())
     for key in TIMING_KEYS:
-        meta["info"].pop(key)
+        meta["info"].pop(key, None)
     out["meta.npy"] = meta
     return out
 
@@ -305,10 +298,6 @@ def test_same_seed_gives_identical_networks(two_runs) -> None:
     assert without_timings(ma) == without_timings(mb)
 
 
-@pytest.mark.xfail(reason="BUG: network.py Network.save writes net.info into the file's "
-                          "metadata, and learn.py fit() puts wall-clock timings in info "
-                          "(fit_seconds, learn_seconds, polish_seconds, us_per_step), so two "
-                          "runs with the same seed give different .asrbf bytes", strict=True)
 def test_same_seed_gives_byte_identical_file(two_runs) -> None:
     """Determinism: the same seed gives a byte-identical .asrbf file."""
     a, b = two_runs

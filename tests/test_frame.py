@@ -138,7 +138,7 @@ def test_unknown_view_axis(syn) -> None:
 
 
 def test_sphere_is_not_a_height_field(syn) -> None:
-    with pytest.warns(HeightFieldWarning, match=r"not a height field along the 'z' axis"):
+    with pytest.warns(HeightFieldWarning, match=r"folds over itself along the 'z' axis"):
         to_height_field(syn.sphere_points(2000))
 
 
@@ -148,16 +148,10 @@ def test_height_fields_do_not_warn(syn) -> None:
         no_warnings(to_height_field, pts)
 
 
-@pytest.mark.xfail(reason="BUG: frame._height_field_violation flags steep but single-valued "
-                          "height fields: the depth range of a 2-spacing cell grows with the "
-                          "slope, and a Gaussian bump sampled 30 x 30 exceeds 0.1", strict=True)
 def test_steep_coarse_height_field_does_not_warn(syn) -> None:
     no_warnings(to_height_field, syn.bump_points(30))
 
 
-@pytest.mark.xfail(reason="BUG: frame._height_field_violation compares cell depth ranges with "
-                          "10% of the whole depth range, so sensor noise on a nearly flat scan "
-                          "reads as folding", strict=True)
 def test_noisy_flat_scan_does_not_warn(syn) -> None:
     pts = syn.flat_points(40)
     pts[:, 2] += np.random.default_rng(0).normal(0.0, 0.01, len(pts))

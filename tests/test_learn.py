@@ -12,7 +12,7 @@ import pytest
 
 import asrbf_mesh as am
 from asrbf_mesh.config import FitConfig
-from asrbf_mesh.errors import FitError, ScanError
+from asrbf_mesh.errors import ScanError
 from asrbf_mesh.frame import to_height_field
 from asrbf_mesh.learn import MIN_POINTS, LearnedState, auto_d_min, learn, residuals
 
@@ -130,8 +130,10 @@ def test_growth_criteria_hold_at_insertion(franke40, d: float) -> None:
 
 
 def test_rms_threshold_above_every_error_blocks_growth(franke40) -> None:
-    with pytest.raises(FitError, match="no neuron"):
-        fit(franke40, rms_threshold=5.0, **SEQ)
+    # criterion 3 never holds: no neuron grows, the bias alone is a valid network
+    net = fit(franke40, rms_threshold=5.0, **SEQ)
+    assert net.n_neurons == 0 and net.log.added == 0
+    assert np.isfinite(net.a0)
 
 
 def test_literal_eq4_decay_stalls(franke_points) -> None:
@@ -153,9 +155,11 @@ def test_max_neurons_caps_k(franke39) -> None:
 
 
 def test_error_threshold_above_the_depth_range_blocks_growth(franke40) -> None:
-    # no observation is badly fitted enough to grow a neuron: an explicit failure
-    with pytest.raises(FitError, match="no neuron"):
-        fit(franke40, error_threshold=2.0, **SEQ)
+    # no observation is badly fitted enough to grow a neuron: a bias-only network
+    net = fit(franke40, error_threshold=2.0, **SEQ)
+    assert net.n_neurons == 0
+    z = net.evaluate(np.zeros((3, 2)) + franke40[:3, :2])
+    assert np.all(np.isfinite(z)) and np.ptp(z) == 0
 
 
 # ----------------------------------------------------------------------------- pruning
@@ -320,9 +324,6 @@ def test_fit_accepts_a_scan_and_overrides(franke40) -> None:
         fit(franke40, passes=0)
 
 
-@pytest.mark.xfail(reason="BUG: learn.py learn() raises FitError('learning produced no "
-                          "neuron') on a flat scan, which DESIGN.md section 5 calls valid; the "
-                          "exact fit is the bias alone", raises=FitError, strict=True)
 def test_flat_scan_fits(syn) -> None:
     pts = syn.flat_points(30, z=7.5)
     net = fit(pts)

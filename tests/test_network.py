@@ -15,7 +15,7 @@ import asrbf_mesh as am
 from asrbf_mesh.config import FitConfig
 from asrbf_mesh.errors import AsrbfError, NetworkFileError
 from asrbf_mesh.frame import Frame
-from asrbf_mesh.network import FORMAT_VERSION, FitLog, Network
+from asrbf_mesh.network import FORMAT_VERSION, VOLATILE_INFO, FitLog, Network
 
 
 def grid_xy(net: Network, n: int = 25, inset: float = 0.02) -> np.ndarray:
@@ -159,9 +159,6 @@ def test_constructor_rejects_bad_parameters(a0, centers, widths, weights, match)
         Network(a0, np.array(centers), np.array(widths), np.array(weights), FRAME, FitConfig())
 
 
-@pytest.mark.xfail(reason="BUG: network.py Network.__post_init__ reshapes centers with "
-                          "reshape(-1, 2), so (4, 3) centers silently become 6 neurons with "
-                          "scrambled coordinates instead of raising", strict=True)
 def test_constructor_rejects_centers_of_the_wrong_width() -> None:
     with pytest.raises(ValueError, match="centers"):
         Network(0.0, np.arange(12.0).reshape(4, 3) / 12, np.full(6, 0.1), np.zeros(6), FRAME,
@@ -195,7 +192,8 @@ def test_save_load_exact_round_trip(franke_net: Network, tmp_path: Path) -> None
     assert out == tmp_path / "franke.asrbf"
     back = Network.load(out)
     assert_same_network(franke_net, back)
-    assert back.info == json.loads(json.dumps(franke_net.info))
+    stored = {k: v for k, v in franke_net.info.items() if k not in VOLATILE_INFO}
+    assert back.info == json.loads(json.dumps(stored))
     assert back.log is not None and franke_net.log is not None
     for name in FitLog._ARRAYS:
         np.testing.assert_array_equal(getattr(back.log, name), getattr(franke_net.log, name))

@@ -132,10 +132,6 @@ def test_polish_weights_keeps_the_network_when_least_squares_is_worse() -> None:
     assert pr.a0 == 0.0 and pr.weights is weights
 
 
-@pytest.mark.xfail(reason="BUG: polish.py polish_weights with ridge=0 (allowed by FitConfig."
-                          "polish_ridge >= 0) solves singular normal equations when a neuron "
-                          "has no data under it; spsolve warns and returns NaN, and the whole "
-                          "polish is silently skipped", strict=True)
 def test_polish_weights_without_ridge_tolerates_a_neuron_without_data(learned) -> None:
     hf, st = learned
     centers = np.vstack([st.centers, [[1.2, 1.2]]])  # no point within 3.5 sigma
