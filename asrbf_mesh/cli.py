@@ -1,4 +1,4 @@
-"""The ``asrbf`` command: fit, info, reconstruct, demo.
+"""The ``asrbf`` command: fit, info, reconstruct, fill-holes, demo.
 
 Errors a user can cause print one line on stderr and exit with code 2; an
 unexpected bug exits with code 1 and a traceback.
@@ -14,13 +14,15 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
+from ._atomic import check_output_path
 from .config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
 from .errors import AsrbfError
 from .frame import VIEW_AXES
+from .holes import fill_holes
 from .io import face_map_path, load_scan, save_mesh
 from .learn import fit
 from .network import FORMAT_VERSION, Network
-from .surface import reconstruct
+from .surface import FOOTPRINT_MODES, reconstruct
 
 __all__ = ["main", "build_parser"]
 
@@ -166,14 +168,37 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
     net = Network.load(args.network)
     footprint = load_scan(args.footprint) if args.footprint else None
+    if args.mode in ("scan", "hull") and footprint is None:
+        raise AsrbfError(f"--mode {args.mode} needs --footprint SCAN")
     mesh = reconstruct(net, resolution=args.resolution, spacing_abs=args.spacing,
-                       footprint=footprint, margin_rel=args.margin)
+                       footprint=footprint, mode=args.mode, margin_rel=args.margin)
     save_mesh(mesh, args.output, overwrite_inputs=(args.network, args.footprint))
     if args.json:
         print(json.dumps({"output": args.output, "vertices": mesh.n_vertices,
                           "faces": mesh.n_faces}))
     else:
         print(f"wrote {args.output}: {mesh.n_vertices:,} vertices, {mesh.n_faces:,} faces")
+    return 0
+
+
+def _cmd_fill_holes(args: argparse.Namespace) -> int:
+    scan = load_scan(args.scan)
+    out = check_output_path(args.output, args.scan, args.network)
+    net = Network.load(args.network) if args.network else None
+    res = fill_holes(scan, net, max_hole_size=args.max_hole_size, seed=args.seed,
+                     progress=None if not args.json else False)
+    save_mesh(res.mesh, out, overwrite_inputs=(args.scan, args.network))
+    if args.json:
+        print(json.dumps(res.to_dict() | {"output": str(out)}))
+        return 0
+    print(f"{args.scan}: {res.holes_found} holes found (outer border left open), "
+          f"{res.holes_filled} filled, {len(res.holes_skipped)} skipped")
+    for h in res.holes:
+        state = "filled" if h.filled else f"skipped: {h.reason}"
+        print(f"  hole {h.index:>3}  size {h.size_abs:9.4g} ({h.size_pct:5.2f} % of diagonal)  "
+              f"rim {h.rim_vertices:>5}  +{h.vertices_added} vertices  {state}")
+    print(f"wrote {out}: +{res.vertices_added:,} vertices, +{res.faces_added:,} faces "
+          f"(added vertices have quality 1) in {res.seconds:.2f} s")
     return 0
 
 
@@ -223,11 +248,26 @@ def build_parser() -> argparse.ArgumentParser:
     g = r.add_mutually_exclusive_group()
     g.add_argument("--resolution", type=int, help="samples along the longer side")
     g.add_argument("--spacing", type=float, help="grid spacing in scan units")
-    r.add_argument("--footprint", help="keep only cells holding data of this scan")
+    r.add_argument("--footprint", help="the scan whose footprint limits the mesh")
+    r.add_argument("--mode", choices=FOOTPRINT_MODES, default=None,
+                   help="scan: cells with data plus the holes they enclose; hull: a concave "
+                        "hull of the points; full: the whole normalized square "
+                        "[default: scan with --footprint, else full]")
     r.add_argument("--margin", type=float, default=0.0,
-                   help="extend the full square by this fraction per side [default: 0]")
+                   help="mode full: extend the square by this fraction per side [default: 0]")
     r.add_argument("--json", action="store_true")
     r.set_defaults(func=_cmd_reconstruct)
+
+    h = sub.add_parser("fill-holes", help="fill the holes of a scan from its network")
+    h.add_argument("scan", help="scan file (a range grid / mesh, or a bare point cloud)")
+    h.add_argument("-o", "--output", required=True, help="repaired mesh (PLY, OBJ, OFF, STL)")
+    h.add_argument("--network", help="a network fitted to this scan (fitted here if omitted)")
+    h.add_argument("--max-hole-size", default=None,
+                   help="fill only holes up to this size: a length in scan units or a "
+                        "percentage of the bounding-box diagonal, e.g. 5%% [default: all]")
+    h.add_argument("--seed", type=int, default=0, help="seed of the fit [default: 0]")
+    h.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    h.set_defaults(func=_cmd_fill_holes)
 
     d = sub.add_parser("demo", help="fit the face range map shipped with pymeshlab")
     d.add_argument("-o", "--output", default="asrbf-demo", help="output folder [asrbf-demo]")

@@ -27,12 +27,12 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy import ndimage
 from scipy.sparse.linalg import spsolve
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import cKDTree
 
 from . import _holes_kernels as _hk
 from .errors import AsrbfError, ScanError
+from .footprint import Footprint, point_cloud_faces
 from .frame import sampling_spacing
 from .io import Scan
 from .mesh import Mesh
@@ -160,59 +160,6 @@ def parse_size(value: str | float | None, diagonal: float) -> float | None:
     if not (np.isfinite(v) and v > 0):
         raise AsrbfError(f"max hole size must be positive, got {value!r}")
     return v
-
-
-def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) -> np.ndarray:
-    """Triangulate a bare point cloud's footprint: Delaunay in xy without long edges.
-
-    Triangles with an edge longer than ``max_edge * spacing`` are dropped (an alpha
-    shape in spirit), so gaps wider than a few samples stay open.
-    """
-    tri = Delaunay(xy).simplices.astype(np.int64)
-    p = xy[tri]
-    edges = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
-    tri = tri[edges <= max_edge * spacing]
-    a = p[edges <= max_edge * spacing]
-    area = (a[:, 1, 0] - a[:, 0, 0]) * (a[:, 2, 1] - a[:, 0, 1]) - \
-        (a[:, 2, 0] - a[:, 0, 0]) * (a[:, 1, 1] - a[:, 0, 1])
-    tri[area < 0] = tri[area < 0][:, [0, 2, 1]]
-    return tri
-
-
-@dataclass(frozen=True)
-class Footprint:
-    """Raster of the xy plane: 0 where the scan's triangles cover it, else a region label.
-
-    Regions touching the raster's margin are the outside; the others are holes.
-    """
-
-    lo: np.ndarray
-    cell: float
-    labels: np.ndarray
-    outside: frozenset[int]
-
-    def label_at(self, q: np.ndarray) -> np.ndarray:
-        """Region label at (M, 2) xy points (0: covered; outside the raster: 0)."""
-        ny, nx = self.labels.shape
-        ij = np.floor((np.asarray(q) - self.lo) / self.cell).astype(np.int64)
-        ok = (ij >= 0).all(1) & (ij[:, 0] < nx) & (ij[:, 1] < ny)
-        out = np.zeros(len(ij), dtype=np.int64)
-        out[ok] = self.labels[ij[ok, 1], ij[ok, 0]]
-        return out
-
-    @classmethod
-    def of(cls, xy: np.ndarray, faces: np.ndarray, spacing: float) -> Footprint:
-        """Rasterize the triangles at half the sampling spacing and label the gaps."""
-        cell = 0.5 * spacing
-        lo = xy.min(axis=0) - 3 * cell
-        nx, ny = (np.ceil((xy.max(axis=0) + 3 * cell - lo) / cell).astype(int) + 1)
-        if nx * ny > 200_000_000:
-            raise AsrbfError("the scan's footprint raster would be too large (spacing too small?)")
-        cov = _hk.coverage(xy, faces, lo, cell, int(nx), int(ny))
-        labels, _ = ndimage.label(~cov, structure=np.ones((3, 3), bool))
-        outside = frozenset(np.unique(np.concatenate(
-            [labels[0], labels[-1], labels[:, 0], labels[:, -1]])).tolist()) - {0}
-        return cls(lo, cell, labels, outside)
 
 
 @dataclass

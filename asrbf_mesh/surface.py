@@ -9,14 +9,17 @@ footprint: the grid cells that hold data.
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from .errors import AsrbfError
+from .footprint import Footprint
+from .frame import sampling_spacing
 from .io import Scan
 from .mesh import Mesh
 from .network import Network
 
-__all__ = ["reconstruct", "footprint_mask", "grid_faces"]
+__all__ = ["reconstruct", "grid_faces", "FOOTPRINT_MODES"]
+
+FOOTPRINT_MODES = ("scan", "hull", "full")
 
 
 def grid_faces(nx: int, ny: int, keep: np.ndarray | None = None) -> np.ndarray:
@@ -39,41 +42,9 @@ def grid_faces(nx: int, ny: int, keep: np.ndarray | None = None) -> np.ndarray:
     return tris.reshape(-1, 3).astype(np.int64)
 
 
-def footprint_mask(uv_points: np.ndarray, uv_cells: np.ndarray, spacing: float) -> np.ndarray:
-    """Which query points lie on the scan's footprint.
-
-    The footprint is the occupancy of a grid of cell ``1.5 * spacing`` (unit square)
-    by the scan points, closed by one cell to bridge sampling gaps; real holes,
-    wider than a couple of samples, stay open.
-
-    Parameters
-    ----------
-    uv_points : (N, 2) array
-        Scan points in the unit square.
-    uv_cells : (M, 2) array
-        Query points in the unit square.
-    spacing : float
-        Sampling spacing of the scan in the unit square.
-
-    Returns
-    -------
-    (M,) bool array
-    """
-    cell = 1.5 * spacing
-    n = int(np.ceil(1.0 / cell)) + 3
-    ij = np.clip(np.floor(uv_points / cell).astype(np.int64) + 1, 0, n - 1)
-    occ = np.zeros((n, n), dtype=bool)
-    occ[ij[:, 1], ij[:, 0]] = True
-    occ = ndimage.binary_closing(occ, structure=np.ones((3, 3), bool), border_value=0) | occ
-    q = np.floor(np.asarray(uv_cells) / cell).astype(np.int64) + 1
-    inside = (q >= 0).all(axis=1) & (q < n).all(axis=1)
-    out = np.zeros(len(q), dtype=bool)
-    out[inside] = occ[q[inside, 1], q[inside, 0]]
-    return out
-
-
 def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: float | None = None,
-                footprint: Scan | np.ndarray | None = None, margin_rel: float = 0.0) -> Mesh:
+                footprint: Scan | np.ndarray | None = None, mode: str | None = None,
+                margin_rel: float = 0.0) -> Mesh:
     """Mesh the network surface on a regular grid, in physical units.
 
     Parameters
@@ -87,10 +58,15 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         nearest whole number of steps, so the grid spans the extent exactly. Default: the
         scan's own sampling spacing if known, else 200 samples along the longer side.
     footprint : Scan or (N, 3) array, optional
-        Keep only the grid cells that hold scan data (the scan's footprint);
-        ``None`` meshes the whole normalized square.
+        The scan whose footprint limits the mesh (modes ``scan`` and ``hull``).
+    mode : {"scan", "hull", "full"}, optional
+        ``scan``: the grid cells on the scan's triangles or inside its holes (so holes
+        come out filled); ``hull``: inside a concave hull of the points (bays and
+        notches of the border bridged too); ``full``: the whole normalized square,
+        extended by ``margin_rel`` (the network's extrapolation, paper Fig. 3).
+        Default: ``scan`` with a footprint, else ``full``.
     margin_rel : float
-        Extend the full square by this fraction on every side (extrapolation).
+        Extend the full square by this fraction on every side (mode ``full``).
 
     Returns
     -------
@@ -116,6 +92,12 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     """
     frame = net.frame
     span = frame.scale[:2]
+    if mode is None:
+        mode = "full" if footprint is None else "scan"
+    if mode not in FOOTPRINT_MODES:
+        raise AsrbfError(f"mode must be one of {', '.join(FOOTPRINT_MODES)}; got {mode!r}")
+    if mode != "full" and footprint is None:
+        raise AsrbfError(f"mode {mode!r} needs the scan as footprint")
     if resolution is not None and spacing_abs is not None:
         raise AsrbfError("give either resolution or spacing_abs, not both")
     if resolution is not None:
@@ -130,6 +112,8 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         step = float(net.info["spacing"]) * float(np.sqrt(span[0] * span[1]))
     else:
         step = float(span.max()) / 199
+    if mode != "full":
+        margin_rel = 0.0
     if not (0.0 <= margin_rel < 10.0):
         raise AsrbfError(f"margin_rel must lie in [0, 10), got {margin_rel!r}")
     lo = frame.offset[:2] - margin_rel * span
@@ -143,20 +127,17 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     gy = np.linspace(lo[1], hi[1], ny)
     xy = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)
     keep = None
-    if footprint is not None:
+    if mode != "full":
         pts = footprint.points if isinstance(footprint, Scan) else np.asarray(footprint, float)
-        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 3:
             raise AsrbfError("footprint must be a Scan or an (N, 3) array of points")
-        uv_scan = frame.to_unit(pts)[:, :2]
-        spacing = float(net.info.get("spacing") or 0.0)
-        if spacing <= 0:
-            from .frame import sampling_spacing
-
-            spacing = sampling_spacing(uv_scan)
+        local_xy = np.ascontiguousarray((pts @ frame.rotation)[:, :2])
+        faces = footprint.faces if isinstance(footprint, Scan) else None
+        fp = Footprint.of_points(local_xy, faces, sampling_spacing(local_xy), mode=mode)
         mid_x = 0.5 * (gx[:-1] + gx[1:])
         mid_y = 0.5 * (gy[:-1] + gy[1:])
         centres = np.stack(np.meshgrid(mid_x, mid_y), -1).reshape(-1, 2)
-        keep = footprint_mask(uv_scan, frame.xy_to_unit(centres), spacing).reshape(ny - 1, nx - 1)
+        keep = fp.inside(centres).reshape(ny - 1, nx - 1)
     faces = grid_faces(nx, ny, keep)
     used = np.unique(faces)
     if used.size == 0:

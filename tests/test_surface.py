@@ -7,7 +7,8 @@ import pytest
 
 import asrbf_mesh as am
 from asrbf_mesh.errors import AsrbfError
-from asrbf_mesh.surface import footprint_mask, grid_faces, reconstruct
+from asrbf_mesh.footprint import Footprint
+from asrbf_mesh.surface import grid_faces, reconstruct
 
 HOLE_CENTRE = np.array([140.0, 50.0])  # mm, inside the Franke scan
 HOLE_RADIUS = 15.0
@@ -139,23 +140,21 @@ def test_margin_extends_the_square(franke_net: am.Network) -> None:
 # ----------------------------------------------------------------------------- footprint
 
 
-def test_footprint_removes_the_hole_and_keeps_the_rest(holed) -> None:
+def test_scan_mode_fills_the_hole_and_keeps_the_rest(holed) -> None:
     pts, net = holed
-    mesh = reconstruct(net, resolution=81, footprint=pts)
+    mesh = reconstruct(net, resolution=81, footprint=pts)  # mode "scan": holes included
     full = reconstruct(net, resolution=81)
-    assert mesh.n_vertices < full.n_vertices
+    # the interior hole is meshed: cells with data plus the holes they enclose
     d = np.linalg.norm(mesh.vertices[:, :2] - HOLE_CENTRE, axis=1)
-    # a kept cell lies within ~2 occupancy cells (1.5 x spacing each) of a scan point:
-    # 4.5 mm here, plus half a grid diagonal (0.7 mm)
-    margin = 6.0
-    assert d.min() > HOLE_RADIUS - margin
-    # every grid vertex well away from the hole and the scan border is kept
+    assert d.min() < 1.0
+    # nothing beyond the scan's border; every grid vertex well inside the border is kept
     fr = net.frame
+    assert np.all(mesh.vertices[:, :2] >= fr.offset[:2] - 1.0)
+    assert np.all(mesh.vertices[:, :2] <= fr.offset[:2] + fr.scale[:2] + 1.0)
     inner = full.vertices[:, :2]
     lo = fr.offset[:2] + 0.03 * fr.scale[:2]
     hi = fr.offset[:2] + 0.97 * fr.scale[:2]
-    expect = ((np.linalg.norm(inner - HOLE_CENTRE, axis=1) > HOLE_RADIUS + margin)
-              & np.all((inner > lo) & (inner < hi), axis=1))
+    expect = np.all((inner > lo) & (inner < hi), axis=1)
     kept = {tuple(v) for v in np.round(mesh.vertices[:, :2], 9)}
     missing = [tuple(v) for v in np.round(inner[expect], 9) if tuple(v) not in kept]
     assert not missing
@@ -163,6 +162,29 @@ def test_footprint_removes_the_hole_and_keeps_the_rest(holed) -> None:
     assert mesh.faces.max() < mesh.n_vertices
     assert np.all(signed_areas(mesh) > 0)
     assert len(np.unique(mesh.faces)) == mesh.n_vertices  # no unused vertex
+
+
+def test_scan_mode_leaves_a_border_notch_open_hull_bridges_it(syn) -> None:
+    pts = syn.franke_points(60, seed=3)
+    notch = np.array([140.0, 20.0])  # on the lower border (y from 20 to 80 mm)
+    pts = pts[np.linalg.norm(pts[:, :2] - notch, axis=1) > 3.0]
+    net = am.fit(pts, seed=0, passes=1, progress=False)
+    scan = reconstruct(net, resolution=81, footprint=pts, mode="scan")
+    hull = reconstruct(net, resolution=81, footprint=pts, mode="hull")
+    full = reconstruct(net, resolution=81, mode="full")
+    def near_notch(m):
+        return int((np.linalg.norm(m.vertices[:, :2] - notch, axis=1) < 1.5).sum())
+    assert near_notch(scan) == 0          # the notch belongs to the outside
+    assert near_notch(hull) > 0           # the concave hull bridges a 6 mm notch
+    assert near_notch(full) > 0
+    assert scan.n_faces < hull.n_faces <= full.n_faces
+
+
+def test_mode_needs_a_footprint(franke_net: am.Network) -> None:
+    with pytest.raises(AsrbfError, match="needs the scan"):
+        reconstruct(franke_net, resolution=11, mode="hull")
+    with pytest.raises(AsrbfError, match="mode must be one of"):
+        reconstruct(franke_net, resolution=11, mode="nope")
 
 
 def test_footprint_accepts_a_scan(holed) -> None:
@@ -173,13 +195,16 @@ def test_footprint_accepts_a_scan(holed) -> None:
     np.testing.assert_array_equal(a.faces, b.faces)
 
 
-def test_footprint_mask_unit() -> None:
-    g = (np.arange(50) + 0.5) / 50
-    uv = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
-    keep = np.linalg.norm(uv - 0.5, axis=1) > 0.2
-    q = np.array([[0.5, 0.5], [0.1, 0.1], [0.9, 0.5], [2.0, 2.0], [-1.0, 0.5]])
-    np.testing.assert_array_equal(footprint_mask(uv[keep], q, 0.02),
-                                  [False, True, True, False, False])
+def test_footprint_labels_holes_and_outside() -> None:
+    g = np.arange(50) + 0.5
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    xy = xy[np.linalg.norm(xy - 25.0, axis=1) > 8.0]  # a disk hole in a 50 x 50 grid
+    fp = Footprint.of_points(xy, None, 1.0)
+    q = np.array([[25.0, 25.0], [5.0, 5.0], [45.0, 25.0], [80.0, 80.0], [-10.0, 25.0]])
+    np.testing.assert_array_equal(fp.inside(q), [True, True, True, False, False])
+    lab = fp.label_at(q)
+    assert lab[0] > 0 and lab[0] not in fp.outside  # the hole: uncovered, enclosed
+    assert lab[1] == 0 and lab[2] == 0  # covered
 
 
 def test_grid_faces() -> None:
@@ -205,7 +230,8 @@ def test_grid_faces() -> None:
     ({"spacing_abs": 1e-4}, "too large"),
     ({"footprint": np.zeros((5, 2))}, r"footprint must be a Scan or an \(N, 3\) array"),
     ({"footprint": np.zeros((0, 3))}, "footprint must be"),
-    ({"footprint": np.array([[1e4, 1e4, 0.0], [1e4 + 1, 1e4 + 1, 0.0]]), "resolution": 11},
+    ({"footprint": np.array([[1e4, 1e4, 0.0], [1e4 + 1, 1e4 + 1, 0.0], [1e4, 1e4 + 1, 0.0],
+                             [1e4 + 1, 1e4, 0.0]]), "resolution": 11},
      "selects no grid cell"),
 ])
 def test_bad_arguments(franke_net: am.Network, kwargs: dict, match: str) -> None:
