@@ -290,6 +290,8 @@ def main(argv: list[str] | None = None) -> int:
     except AsrbfError as exc:
         print(f"asrbf: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into head & co.
+        return 0
     except KeyboardInterrupt:
         print("asrbf: interrupted", file=sys.stderr)
         return 130

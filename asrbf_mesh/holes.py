@@ -38,8 +38,8 @@ from .io import Scan
 from .mesh import Mesh
 from .network import Network
 
-__all__ = ["FillResult", "Footprint", "HoleInfo", "fill_holes", "find_holes", "parse_size",
-           "point_cloud_faces"]
+__all__ = ["FillResult", "HoleInfo", "PunchedScan", "fill_holes", "find_holes", "parse_size",
+           "punch_holes"]
 
 
 @dataclass(frozen=True)
@@ -135,6 +135,69 @@ class FillResult:
                 "faces_added": self.faces_added, "border_edges": self.border_edges,
                 "seconds": self.seconds,
                 "holes": [h.__dict__ | {"centre": list(h.centre)} for h in self.holes]}
+
+
+@dataclass(frozen=True, eq=False)
+class PunchedScan:
+    """A scan with disks removed, and the removed points as ground truth."""
+
+    scan: Scan
+    truth: np.ndarray
+    centres: np.ndarray
+    radii: np.ndarray
+
+
+def punch_holes(scan: Scan, *, count: int = 5, radius_rel: tuple[float, float] = (0.03, 0.06),
+                seed: int = 0, max_tries: int = 5000) -> PunchedScan:
+    """Remove ``count`` interior disks (in world xy) from a scan, keeping them as truth.
+
+    Radii are drawn in ``radius_rel`` times the larger side of the xy extent; a disk is
+    accepted only if it lies inside the scan's footprint with a margin of half a
+    radius (no border, no existing hole nearby) and away from the other disks.
+
+    Raises
+    ------
+    ScanError
+        If ``count`` such disks cannot be placed.
+    """
+    rng = np.random.default_rng(seed)
+    xy = np.ascontiguousarray(scan.points[:, :2])
+    spacing = sampling_spacing(xy)
+    fp = Footprint.of_points(xy, scan.faces, spacing)
+    extent = float((xy.max(0) - xy.min(0)).max())
+    centres: list[np.ndarray] = []
+    radii: list[float] = []
+    ring = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    for _ in range(max_tries):
+        if len(centres) == count:
+            break
+        r = rng.uniform(*radius_rel) * extent
+        c = xy[rng.integers(len(xy))]
+        probe = np.concatenate([c + np.column_stack([np.cos(ring), np.sin(ring)]) * rr
+                                for rr in (0.25 * r, 0.5 * r, r, 1.5 * r)])
+        lab = fp.label_at(np.vstack([c[None], probe]))
+        if np.any(lab != 0):  # every probe on the scan's own triangles
+            continue
+        pairs = zip(centres, radii, strict=True)
+        if any(np.linalg.norm(c - c2) < 1.6 * (r + r2) for c2, r2 in pairs):
+            continue
+        centres.append(c)
+        radii.append(r)
+    if len(centres) < count:
+        raise ScanError(f"could place only {len(centres)} of {count} interior disks")
+    cen = np.array(centres)
+    rad = np.array(radii)
+    d = np.linalg.norm(xy[:, None, :] - cen[None], axis=2)
+    removed = (d <= rad[None]).any(axis=1)
+    keep = np.flatnonzero(~removed)
+    remap = np.full(len(xy), -1, dtype=np.int64)
+    remap[keep] = np.arange(len(keep))
+    faces = None
+    if scan.faces is not None:
+        f = remap[scan.faces]
+        faces = f[(f >= 0).all(axis=1)]
+    holed = Scan(scan.points[keep], faces, source=scan.source, grid_shape=None)
+    return PunchedScan(holed, scan.points[removed].copy(), cen, rad)
 
 
 def parse_size(value: str | float | None, diagonal: float) -> float | None:
