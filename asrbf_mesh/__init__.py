@@ -26,7 +26,9 @@ if "NUMBA_THREADING_LAYER" not in _os.environ:
 from ._version import __version__
 from .config import FitConfig
 from .errors import AsrbfError, ConfigError, FitError, NetworkFileError, ScanError
+from .footprint import Footprint
 from .frame import Frame, HeightField, HeightFieldWarning, to_height_field
+from .holes import FillResult, HoleInfo, fill_holes, punch_holes
 from .io import Scan, face_map_path, load_scan, save_mesh
 from .learn import fit, learn
 from .mesh import Mesh
@@ -37,12 +39,15 @@ __all__ = [
     "__version__",
     "AsrbfError",
     "ConfigError",
+    "FillResult",
     "FitConfig",
     "FitError",
     "FitLog",
+    "Footprint",
     "Frame",
     "HeightField",
     "HeightFieldWarning",
+    "HoleInfo",
     "Mesh",
     "Network",
     "NetworkFileError",
@@ -50,9 +55,11 @@ __all__ = [
     "Scan",
     "ScanError",
     "face_map_path",
+    "fill_holes",
     "fit",
     "learn",
     "load_scan",
+    "punch_holes",
     "reconstruct",
     "save_mesh",
     "to_height_field",
