@@ -31,6 +31,7 @@ from .frame import Frame, HeightField, HeightFieldWarning, to_height_field
 from .holes import FillResult, HoleInfo, fill_holes, punch_holes
 from .io import Scan, face_map_path, load_scan, save_mesh
 from .learn import fit, learn
+from .lod import LodLevel, lod_set, write_lod_set
 from .mesh import Mesh
 from .network import FitLog, Network, NeuronStats
 from .surface import reconstruct
@@ -48,6 +49,7 @@ __all__ = [
     "HeightField",
     "HeightFieldWarning",
     "HoleInfo",
+    "LodLevel",
     "Mesh",
     "Network",
     "NetworkFileError",
@@ -59,8 +61,10 @@ __all__ = [
     "fit",
     "learn",
     "load_scan",
+    "lod_set",
     "punch_holes",
     "reconstruct",
     "save_mesh",
     "to_height_field",
+    "write_lod_set",
 ]

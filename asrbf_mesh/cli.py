@@ -1,4 +1,4 @@
-"""The ``asrbf`` command: fit, info, reconstruct, fill-holes, demo.
+"""The ``asrbf`` command: fit, info, reconstruct, fill-holes, lod, demo.
 
 Errors a user can cause print one line on stderr and exit with code 2; an
 unexpected bug exits with code 1 and a traceback.
@@ -21,6 +21,7 @@ from .frame import VIEW_AXES
 from .holes import fill_holes
 from .io import face_map_path, load_scan, save_mesh
 from .learn import fit
+from .lod import lod_set, write_lod_set
 from .network import FORMAT_VERSION, Network
 from .surface import FOOTPRINT_MODES, reconstruct
 
@@ -202,6 +203,28 @@ def _cmd_fill_holes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_lod(args: argparse.Namespace) -> int:
+    scan = load_scan(args.scan)
+    levels = lod_set(scan, levels=args.levels, method=args.method, seed=args.seed)
+    manifest = write_lod_set(scan, levels, args.output, compare_qem=args.compare_qem,
+                             metro=not args.no_metro)
+    if args.json:
+        print(json.dumps(manifest))
+        return 0
+    print(f"{args.scan}: {len(levels)} levels ({args.method}) -> {args.output}/manifest.json")
+    for lv in manifest["levels"]:
+        err = (f"RMS {lv['rms_pct']:.3f} %  Hausdorff {lv['hausdorff_pct']:.2f} %"
+               if lv.get("rms_pct") is not None else "")
+        print(f"  level {lv['index']}  {lv['faces']:>9,} faces  {lv['bytes'] / 1024:8.1f} KB  "
+              f"{err}")
+    for q in manifest.get("qem") or []:
+        err = (f"RMS {q['rms_pct']:.3f} %  Hausdorff {q['hausdorff_pct']:.2f} %"
+               if q.get("rms_pct") is not None else "")
+        print(f"  qem {q['method']:<20} {q['faces']:>9,} faces  {q['bytes'] / 1024:8.1f} KB  "
+              f"{err}")
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     src = face_map_path()
     out = Path(args.output)
@@ -268,6 +291,21 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--seed", type=int, default=0, help="seed of the fit [default: 0]")
     h.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     h.set_defaults(func=_cmd_fill_holes)
+
+    lo = sub.add_parser("lod", help="write a level-of-detail mesh set with a manifest")
+    lo.add_argument("scan", help="scan file (a range grid / mesh, or a point cloud)")
+    lo.add_argument("-o", "--output", required=True, help="output folder")
+    lo.add_argument("--levels", type=int, default=4, help="number of levels [default: 4]")
+    lo.add_argument("--method", choices=("resample", "refit"), default="resample",
+                    help="resample: one network on coarser grids; refit: one fit per level "
+                         "with D_min = 0.01 x 2^i [default: resample]")
+    lo.add_argument("--compare-qem", action="store_true",
+                    help="also decimate the scan mesh to the same face counts (fast-"
+                         "simplification and pymeshlab quadric edge collapse)")
+    lo.add_argument("--no-metro", action="store_true", help="skip the Metro error measures")
+    lo.add_argument("--seed", type=int, default=0)
+    lo.add_argument("--json", action="store_true", help="print the manifest on stdout")
+    lo.set_defaults(func=_cmd_lod)
 
     d = sub.add_parser("demo", help="fit the face range map shipped with pymeshlab")
     d.add_argument("-o", "--output", default="asrbf-demo", help="output folder [asrbf-demo]")

@@ -1,0 +1,101 @@
+"""Adapter for :mod:`fast_simplification`: the only module of the package that imports it.
+
+fast-simplification (a wrapper of Sven Forstmann's Fast-Quadric-Mesh-Simplification)
+keeps its mesh in module-level C++ state between ``load`` and ``simplify``: calls are
+not thread-safe, so this adapter serializes them with a lock.
+
+Written against fast-simplification 0.2 (``preserve_border`` exists since 0.1.9;
+without it the decimation erodes a range scan's open border, DESIGN.md §3).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import fast_simplification
+import numpy as np
+
+from .errors import AsrbfError
+from .mesh import Mesh
+
+__all__ = ["fast_decimate"]
+
+_LOCK = threading.Lock()
+
+
+def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop unreferenced vertices, keeping the others' order (no pymeshlab import here)."""
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    used = np.unique(f)
+    return np.asarray(vertices, dtype=np.float64)[used], np.searchsorted(used, f)
+
+
+def fast_decimate(mesh: Mesh, *, target_faces: int, preserve_border: bool = True,
+                  aggressiveness: float = 7.0) -> Mesh:
+    """Quadric decimation with fast-simplification.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        Scan units; unreferenced vertices are dropped first.
+    target_faces : int
+        Requested face count. With ``preserve_border`` no edge touching a border vertex
+        collapses, so a ragged border puts a floor under the reachable count (≈ 5,100
+        faces on the face map) and the result then has more faces than requested. A
+        target at or above the mesh's face count returns the (compacted) mesh unchanged.
+    preserve_border : bool
+        Keep the open border (fast-simplification's ``preserve_border``; its own default
+        is False).
+    aggressiveness : float
+        fast-simplification's ``agg`` (its default 7): higher is faster and coarser;
+        low values may stop short of the target.
+
+    Returns
+    -------
+    Mesh
+        Compact (no unreferenced vertices), float64 vertices.
+
+    Raises
+    ------
+    AsrbfError
+        Bad arguments, or an error inside fast-simplification.
+
+    Notes
+    -----
+    The target is passed as ``target_count`` (an absolute face count) rather than
+    ``target_reduction``: the fraction would be rounded down by the library.
+
+    Examples
+    --------
+    >>> from asrbf_mesh.surface import grid_faces
+    >>> x, y = np.meshgrid(np.linspace(0, 1, 20), np.linspace(0, 1, 20))
+    >>> v = np.c_[x.ravel(), y.ravel(), (x * y).ravel()]
+    >>> out = fast_decimate(Mesh(v, grid_faces(20, 20)), target_faces=200,
+    ...                     preserve_border=False)
+    >>> 190 <= out.n_faces <= 200
+    True
+    """
+    if not isinstance(mesh, Mesh):
+        raise AsrbfError(f"mesh must be an asrbf_mesh.Mesh, got {type(mesh).__name__}")
+    if mesh.n_faces == 0:
+        raise AsrbfError("mesh has no faces")
+    if not (isinstance(target_faces, (int, np.integer)) and target_faces >= 1):
+        raise AsrbfError(f"target_faces must be a positive integer, got {target_faces!r}")
+    if not (np.isfinite(aggressiveness) and aggressiveness >= 0):
+        raise AsrbfError(f"aggressiveness must be a number >= 0, got {aggressiveness!r}")
+    v, f = _compact(mesh.vertices, mesh.faces)
+    if target_faces >= len(f):
+        return Mesh(v, f)
+    try:
+        with _LOCK:
+            pts, tris = fast_simplification.simplify(
+                np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, np.int32),
+                target_count=int(target_faces), agg=float(aggressiveness), verbose=False,
+                return_collapses=False, lossless=False, preserve_border=bool(preserve_border))
+    except Exception as exc:
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        raise AsrbfError(f"fast-simplification failed: {text[:200]}") from None
+    tris = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    if len(tris) == 0:
+        raise AsrbfError("fast-simplification returned an empty mesh")
+    return Mesh(*_compact(np.asarray(pts, dtype=np.float64), tris))
