@@ -15,7 +15,14 @@ from scipy.spatial import Delaunay
 from . import _holes_kernels as _hk
 from .errors import AsrbfError
 
-__all__ = ["Footprint", "point_cloud_faces"]
+__all__ = ["Footprint", "point_cloud_faces", "signed_areas"]
+
+
+def signed_areas(xy: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Twice the signed area of each triangle in the plane (> 0: counter-clockwise), (F,)."""
+    p = xy[tris]
+    return ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+            - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
 
 
 def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) -> np.ndarray:
@@ -28,9 +35,7 @@ def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) 
     p = xy[tri]
     edges = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
     tri = tri[edges <= max_edge * spacing]
-    a = p[edges <= max_edge * spacing]
-    area = (a[:, 1, 0] - a[:, 0, 0]) * (a[:, 2, 1] - a[:, 0, 1]) - \
-        (a[:, 2, 0] - a[:, 0, 0]) * (a[:, 1, 1] - a[:, 0, 1])
+    area = signed_areas(xy, tri)
     tri[area < 0] = tri[area < 0][:, [0, 2, 1]]
     return tri
 

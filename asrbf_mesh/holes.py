@@ -32,7 +32,7 @@ from scipy.spatial import cKDTree
 
 from . import _holes_kernels as _hk
 from .errors import AsrbfError, ScanError
-from .footprint import Footprint, point_cloud_faces
+from .footprint import Footprint, point_cloud_faces, signed_areas
 from .frame import sampling_spacing
 from .io import Scan
 from .mesh import Mesh
@@ -347,9 +347,7 @@ def _fill_one(hole: _Hole, xy: np.ndarray, depth: np.ndarray, net: Network, face
     tris = tris[~covered & ((region == hole.label) | (region == 0))]
     if len(tris) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64), "nothing to triangulate"
-    p = pts[tris]
-    area = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - \
-        (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+    area = signed_areas(pts, tris)
     wrong = area < 0 if ccw else area > 0
     tris[wrong] = tris[wrong][:, [0, 2, 1]]
     # closed: every rim edge is now an edge of exactly one fill triangle
@@ -425,11 +423,9 @@ def fill_holes(scan: Scan, net: Network | None = None, *,
     if len(faces) == 0:
         raise ScanError("the scan has no triangles to find holes in")
     holes, border, fp = find_holes(xy, faces, spacing)
-    p = xy[faces]
-    area = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - \
-        (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+    area = signed_areas(xy, faces)
     ccw = bool(np.sum(area > 0) >= np.sum(area < 0))
-    face_tree = cKDTree(p.mean(axis=1))
+    face_tree = cKDTree(xy[faces].mean(axis=1))
 
     new_pts: list[np.ndarray] = []
     new_tris: list[np.ndarray] = []
