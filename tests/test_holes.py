@@ -158,3 +158,15 @@ def test_cli_fill_holes_json(tmp_path, capsys) -> None:
     assert len(back.faces) == len(p.scan.faces) + data["faces_added"]
     assert main(["fill-holes", str(src), "-o", str(src)]) == 2  # never overwrite the input
     assert "input" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_face_map_natural_holes_filled_border_kept() -> None:
+    scan = am.load_scan(am.face_map_path())
+    res = fill_holes(scan, seed=0, progress=False)
+    assert res.holes_found >= 15 and res.holes_filled == res.holes_found
+    border = max(boundary_loops(scan.faces), key=len)  # the scan's outer border
+    after = boundary_loops(res.mesh.faces)
+    assert any(set(lp.tolist()) == set(border.tolist()) for lp in after)
+    _, counts = edges_count(res.mesh.faces)
+    assert counts.max() == 2 and int((counts == 1).sum()) == res.border_edges
