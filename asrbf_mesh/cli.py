@@ -242,6 +242,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"  wrote {net_path} ({net_path.stat().st_size:,} bytes)")
     print(f"  wrote {p1} ({fp.n_vertices:,} vertices, footprint of the scan)")
     print(f"  wrote {p2} ({full.n_vertices:,} vertices, whole normalized square)")
+    print("  (the first run after installing compiles the numba kernels, about 20 s, and caches "
+          "them: later fits take about a second)")
     return 0
 
 
