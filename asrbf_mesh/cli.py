@@ -18,7 +18,7 @@ from ._atomic import check_output_path
 from .config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
 from .errors import AsrbfError
 from .frame import VIEW_AXES
-from .holes import fill_holes
+from .holes import BLENDS, fill_holes
 from .io import face_map_path, load_scan, save_mesh
 from .learn import fit
 from .lod import lod_set, write_lod_set
@@ -186,7 +186,9 @@ def _cmd_fill_holes(args: argparse.Namespace) -> int:
     scan = load_scan(args.scan)
     out = check_output_path(args.output, args.scan, args.network)
     net = Network.load(args.network) if args.network else None
-    res = fill_holes(scan, net, max_hole_size=args.max_hole_size, seed=args.seed,
+    lowpass = None if args.lowpass_rel <= 0 else args.lowpass_rel
+    res = fill_holes(scan, net, max_hole_size=args.max_hole_size, blend=args.blend,
+                     lowpass_rel=lowpass, seed=args.seed,
                      progress=None if not args.json else False)
     save_mesh(res.mesh, out, overwrite_inputs=(args.scan, args.network))
     if args.json:
@@ -290,6 +292,11 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--max-hole-size", default=None,
                    help="fill only holes up to this size: a length in scan units or a "
                         "percentage of the bounding-box diagonal, e.g. 5%% [default: all]")
+    h.add_argument("--blend", choices=BLENDS, default="thin-plate",
+                   help="how the scan's residual z - f crosses the hole [default: thin-plate]")
+    h.add_argument("--lowpass-rel", type=float, default=1.0,
+                   help="over a hole use only neurons at least this many times as wide as "
+                        "the hole; 0 keeps every neuron [default: 1]")
     h.add_argument("--seed", type=int, default=0, help="seed of the fit [default: 0]")
     h.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     h.set_defaults(func=_cmd_fill_holes)
