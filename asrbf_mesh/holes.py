@@ -325,6 +325,20 @@ def _lowpass(net: Network, hole_size: float, factor: float | None) -> Network:
                    net.config, None, net.info)
 
 
+def _segments_through(pts: np.ndarray, seg: np.ndarray, points: np.ndarray,
+                      spacing: float) -> np.ndarray:
+    """Which segments pass (within 1e-6 spacing) through any of ``points``."""
+    a, b = pts[seg[:, 0]], pts[seg[:, 1]]
+    d = b - a
+    L2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
+    hit = np.zeros(len(seg), bool)
+    for q in points:
+        t = np.clip(np.einsum("ij,ij->i", q - a, d) / L2, 0.0, 1.0)
+        dist = np.linalg.norm(a + t[:, None] * d - q, axis=1)
+        hit |= dist < 1e-6 * spacing
+    return hit
+
+
 def _fill_one(hole: _Hole, xy: np.ndarray, depth: np.ndarray, net: Network, faces: np.ndarray,
               face_tree: cKDTree, scan_tree: cKDTree, spacing: float, ccw: bool,
               labels_fn, blend_mode: str,
@@ -348,12 +362,25 @@ def _fill_one(hole: _Hole, xy: np.ndarray, depth: np.ndarray, net: Network, face
             dist, _ = cKDTree(rim_xy).query(g)
             inner = g[dist > 0.6 * spacing]
     pts = np.vstack([rim_xy, inner])
-    try:
-        res = triangle.triangulate({"vertices": pts, "segments": seg}, "pYQ")
-    except Exception as exc:  # triangle signals bad input by exceptions
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), f"triangulation failed ({exc})"
-    if "triangles" not in res or len(res["vertices"]) != len(pts):
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), "triangulation changed the rim"
+    constraints = seg
+    for _ in range(4):
+        try:
+            # with an open rim, triangle's hole eating would empty the whole polygon: keep
+            # the convex hull ("c") and let the coverage filters below remove the outside
+            flags = "pYQ" if len(constraints) == len(seg) else "pcYQ"
+            res = triangle.triangulate({"vertices": pts, "segments": constraints}, flags)
+        except Exception as exc:  # triangle signals bad input by exceptions
+            return np.zeros((0, 3)), np.zeros((0, 3), np.int64), f"triangulation failed ({exc})"
+        if "triangles" not in res:
+            return np.zeros((0, 3)), np.zeros((0, 3), np.int64), "nothing to triangulate"
+        extra = res["vertices"][len(pts):]
+        if len(extra) == 0:
+            break
+        # the rim crosses itself in the view plane (the surface folds): triangle had to add
+        # vertices at the crossings; drop the crossing rim edges from the constraints
+        constraints = constraints[~_segments_through(pts, constraints, extra, spacing)]
+    else:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), "the rim crosses itself"
     tris = res["triangles"].astype(np.int64)
     cen = pts[tris].mean(axis=1)
     # drop triangles over the scan itself (islands inside the hole, concave rims)
@@ -393,7 +420,10 @@ def _fill_one(hole: _Hole, xy: np.ndarray, depth: np.ndarray, net: Network, face
     order[:n_rim] = rim
     new_ids = np.flatnonzero(keep_new)
     order[n_rim + new_ids] = -(np.arange(len(new_ids)) + 1)
-    reason = None if missing == 0 else f"{missing} rim edges could not be closed"
+    reason = None
+    if missing:
+        fold = " (the rim crosses itself in the view plane)" if len(constraints) < len(seg) else ""
+        reason = f"{missing} rim edges could not be closed{fold}"
     return (np.column_stack([new_xy[new_ids], new_z[new_ids]]), order[tris], reason)
 
 
