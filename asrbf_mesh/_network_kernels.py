@@ -119,11 +119,11 @@ def evaluate_values(pts, a0, packed, support, lo, h, g, start):
 
 
 @njit(cache=True, parallel=True)
-def evaluate(pts, a0, centers, widths, weights, support, lo, h, g, start, items, want_grad):
-    """F (M,) and, if ``want_grad``, df/dx, df/dy (M, 2) at unit-square points (M, 2)."""
+def evaluate_with_gradient(pts, a0, centers, widths, weights, support, lo, h, g, start, items):
+    """Evaluate f (M,) and its gradient df/dx, df/dy (M, 2) at unit-square points (M, 2)."""
     m = pts.shape[0]
     out = np.empty(m)
-    grad = np.zeros((m if want_grad else 0, 2))
+    grad = np.empty((m, 2))
     supp2 = support * support
     for i in prange(m):
         x = pts[i, 0]
@@ -141,13 +141,11 @@ def evaluate(pts, a0, centers, widths, weights, support, lo, h, g, start, items,
             if d2 < supp2 * s2:
                 v = weights[j] * np.exp(-d2 / s2)
                 f += v
-                if want_grad:
-                    gx -= 2.0 * v * dx / s2
-                    gy -= 2.0 * v * dy / s2
+                gx -= 2.0 * v * dx / s2
+                gy -= 2.0 * v * dy / s2
         out[i] = f
-        if want_grad:
-            grad[i, 0] = gx
-            grad[i, 1] = gy
+        grad[i, 0] = gx
+        grad[i, 1] = gy
     return out, grad
 
 

@@ -169,8 +169,6 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
     net = Network.load(args.network)
     footprint = load_scan(args.footprint) if args.footprint else None
-    if args.mode in ("scan", "hull") and footprint is None:
-        raise AsrbfError(f"--mode {args.mode} needs --footprint SCAN")
     mesh = reconstruct(net, resolution=args.resolution, spacing_abs=args.spacing,
                        footprint=footprint, mode=args.mode, margin_rel=args.margin)
     save_mesh(mesh, args.output, overwrite_inputs=(args.network, args.footprint))

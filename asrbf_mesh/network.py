@@ -60,7 +60,7 @@ def eval_unit(grid: tuple, uv: np.ndarray, a0: float, centers: np.ndarray, width
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     if not want_grad:
         return _nk.evaluate_values(uv, a0, packed, s, lo, h, g, start), np.zeros((0, 2))
-    return _nk.evaluate(uv, a0, centers, widths, weights, s, lo, h, g, start, items, True)
+    return _nk.evaluate_with_gradient(uv, a0, centers, widths, weights, s, lo, h, g, start, items)
 
 
 @dataclass(frozen=True, eq=False)
