@@ -51,13 +51,16 @@ def tps_fill(holed: am.Scan, ours: am.FillResult) -> am.Mesh:
     return am.Mesh(v, m.faces)
 
 
-def closed_holes(res: am.FillResult, punched) -> int:
+def closed_holes(res: am.FillResult, punched) -> str:
     """Punched disks whose hole was found and filled (a filled hole centred inside the disk)."""
-    count = 0
+    count = folded = 0
     for c, r in zip(punched.centres, punched.radii, strict=True):
-        count += any(h.filled and np.linalg.norm(np.array(h.centre[:2]) - c) < r
-                     for h in res.holes)
-    return count
+        hit = [h for h in res.holes
+               if h.filled and np.linalg.norm(np.array(h.centre[:2]) - c) < r]
+        count += bool(hit)
+        folded += any(h.layers > 1 for h in hit)
+    out = f"{count}/{len(punched.radii)}"
+    return out + (f" ({folded} at a fold, filled per layer)" if folded else "")
 
 
 def ground_truth(S) -> str:
@@ -69,7 +72,7 @@ def ground_truth(S) -> str:
         t0 = time.perf_counter()
         ours = fill_holes(p.scan, seed=0, progress=False)
         t_ours = time.perf_counter() - t0
-        res["ours (ASRBF)"] = (ours.mesh, t_ours, f"{closed_holes(ours, p)}/5")
+        res["ours (ASRBF)"] = (ours.mesh, t_ours, closed_holes(ours, p))
         t0 = time.perf_counter()
         tps = tps_fill(p.scan, ours)  # time: the spline only (the triangulation is ours)
         res["TPS height field (same triangulation)"] = (tps, time.perf_counter() - t0, "")

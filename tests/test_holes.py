@@ -180,3 +180,47 @@ def test_face_map_natural_holes_filled_border_kept() -> None:
     assert any(set(lp.tolist()) == set(border.tolist()) for lp in after)
     _, counts = edges_count(res.mesh.faces)
     assert counts.max() == 2 and int((counts == 1).sum()) == res.border_edges
+
+
+def folded_scan() -> tuple[am.Scan, np.ndarray]:
+    """Two layers seen one over the other: a front sheet z = 30 + 0.1 x over x <= 42 and a
+    back sheet z = 0.05 y over x >= 28 (half a cell apart in xy), joined by a vertical wall
+    at x = 42 (triangles seen edge-on): the surface folds under itself for 28 <= x <= 42.
+    Returns the scan and the truth of a disk of radius 5 at (35, 25) on both layers."""
+    def sheet(x0, x1, off, z):
+        xs, ys = np.arange(x0, x1 + 1e-9, 1.0) + off, np.arange(0.0, 50.0 + 1e-9, 1.0) + off
+        x, y = np.meshgrid(xs, ys)
+        return np.column_stack([x.ravel(), y.ravel(), z(x.ravel(), y.ravel())]), len(xs), len(ys)
+
+    front, fx, fy = sheet(0.0, 42.0, 0.0, lambda x, y: 30.0 + 0.1 * x)
+    back, bx, by = sheet(28.0, 70.0, 0.5, lambda x, y: 0.05 * y)
+    faces = [grid_faces(fx, fy), grid_faces(bx, by) + len(front)]
+    # the wall: front's last column (x = 42) down to back's column at x = 42.5
+    top = np.arange(fy) * fx + (fx - 1)
+    bottom = len(front) + np.arange(by) * bx + 14
+    wall = [[top[j], bottom[j], top[j + 1]] for j in range(min(fy, by) - 1)]
+    wall += [[top[j + 1], bottom[j], bottom[j + 1]] for j in range(min(fy, by) - 1)]
+    pts = np.vstack([front, back])
+    scan = am.Scan(pts, np.vstack([*faces, np.array(wall)]))
+    inside = np.linalg.norm(pts[:, :2] - [35.0, 25.0], axis=1) <= 5.0
+    keep = np.flatnonzero(~inside)
+    remap = np.full(len(pts), -1)
+    remap[keep] = np.arange(len(keep))
+    f = remap[scan.faces]
+    return am.Scan(pts[keep], f[(f >= 0).all(axis=1)]), pts[inside]
+
+
+def test_hole_at_a_fold_is_filled_on_each_layer() -> None:
+    holed, truth = folded_scan()
+    with np.errstate(all="ignore"), pytest.warns(am.HeightFieldWarning):
+        net = am.fit(holed, seed=0, progress=False)
+    res = fill_holes(holed, net)
+    (hole,) = [h for h in res.holes if np.linalg.norm(np.array(h.centre[:2]) - [35, 25]) < 5]
+    assert hole.filled and hole.layers == 2, hole
+    new = res.mesh.vertices[res.mesh.vertex_quality > 0]
+    # every new vertex lies on one of the two sheets, none in between: each layer is filled
+    # from its own surroundings by a thin plate, which reproduces a plane
+    on_front = np.abs(new[:, 2] - (30.0 + 0.1 * new[:, 0])) < 1e-6
+    on_back = np.abs(new[:, 2] - 0.05 * new[:, 1]) < 1e-6
+    assert (on_front | on_back).all() and on_front.sum() > 20 and on_back.sum() > 20
+    assert point_mesh_distance(truth, res.mesh).max() < 1e-6
