@@ -23,6 +23,7 @@ if "NUMBA_THREADING_LAYER" not in _os.environ:
 
     _numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
+from . import evaluate
 from ._version import __version__
 from .config import FitConfig
 from .errors import AsrbfError, ConfigError, FitError, NetworkFileError, ScanError
@@ -38,6 +39,7 @@ from .surface import reconstruct
 
 __all__ = [
     "__version__",
+    "evaluate",
     "AsrbfError",
     "ConfigError",
     "FillResult",

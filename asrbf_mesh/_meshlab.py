@@ -162,7 +162,7 @@ def _direction(vertex_d: np.ndarray, area_d: np.ndarray | None) -> dict[str, Any
 
 
 def hausdorff(a: Mesh | Scan, b: Mesh | Scan | np.ndarray, *, samples: int | None = None,
-              seed: int = 0) -> dict[str, Any]:
+              seed: int = 0, keep_samples: bool = False) -> dict[str, Any]:
     """Metro-style distances between a mesh and a reference, both ways (pymeshlab).
 
     ``b`` is the reference ("the scan"): percentages are of its bounding-box diagonal.
@@ -186,6 +186,10 @@ def hausdorff(a: Mesh | Scan, b: Mesh | Scan | np.ndarray, *, samples: int | Non
         Ignored for a point-set reference, whose points are all used.
     seed : int
         Seed of the area sampling.
+    keep_samples : bool
+        Also return every sample: each direction dict then has ``points`` (S, 3) and
+        ``distances`` (S,) (vertex samples first, then area samples), and ``a_to_b``
+        has ``vertex_index``: the index in ``a`` of each vertex sample.
 
     Returns
     -------
@@ -257,6 +261,8 @@ def hausdorff(a: Mesh | Scan, b: Mesh | Scan | np.ndarray, *, samples: int | Non
     if fb is None:
         a_to_b = None
         b_to_a = _direction(b_vertex, None)
+        if keep_samples:
+            b_to_a |= {"points": vb + centre, "distances": b_vertex}
     else:
         n = int(samples) if samples is not None else max(len(va), len(vb), _MIN_SAMPLES)
         sa = _surface_samples(va, fa, n, rng)
@@ -265,6 +271,11 @@ def hausdorff(a: Mesh | Scan, b: Mesh | Scan | np.ndarray, *, samples: int | Non
         a_to_b = _direction(a_all[: len(va)], a_all[len(va):])
         b_area = _distances(sb, (va, fa), maxdist) if len(sb) else np.empty(0)
         b_to_a = _direction(b_vertex, b_area)
+        if keep_samples:
+            a_to_b |= {"points": np.vstack([va, sa]) + centre, "distances": a_all,
+                       "vertex_index": np.unique(np.asarray(a.faces, dtype=np.int64))}
+            b_to_a |= {"points": np.vstack([vb, sb]) + centre,
+                       "distances": np.concatenate([b_vertex, b_area])}
 
     dirs = [d for d in (a_to_b, b_to_a) if d is not None]
     out: dict[str, Any] = {
