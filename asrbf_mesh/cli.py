@@ -1,4 +1,4 @@
-"""The ``asrbf`` command: fit, info, reconstruct, fill-holes, lod, metro, demo.
+"""The ``asrbf`` command: fit, info, reconstruct, fill-holes, lod, metro, compare, report, demo.
 
 Errors a user can cause print one line on stderr and exit with code 2; an
 unexpected bug exits with code 1 and a traceback.
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -266,6 +267,53 @@ def _cmd_metro(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from .evaluate.report import compare, write_compare
+
+    scan = load_scan(args.scan)
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise AsrbfError(f"{out}: exists and is not a folder")
+    net = Network.load(args.network) if args.network else None
+    c = compare(scan, net=net, seed=args.seed, holes=args.holes, lod=args.lod,
+                lod_dir=out / "lod", progress=False if args.json else None)
+    paths = write_compare(c, out, meshes=not args.no_meshes)
+    d = c.to_dict()
+    if args.json:
+        print(json.dumps(d | {"files": {k: str(v) for k, v in paths.items()}},
+                         default=float))
+        return 0
+    print(f"{args.scan}: {d['n_points']:,} points, {d['n_neurons']:,} neurons; "
+          f"SOM {d['som_shape'][0]}x{d['som_shape'][1]} ({d['som_nodes']:,} nodes)")
+    print(f"  {'':<8} {'Hausdorff %':>12} {'mean %':>10} {'RMS %':>10}")
+    for name, key in (("ASRBF", "asrbf"), ("SOM", "som")):
+        m = d[key]
+        print(f"  {name:<8} {m['hausdorff_pct']:12.4f} {m['mean_pct']:10.4f} "
+              f"{m['rms_pct']:10.4f}")
+    for r in d.get("holes") or []:
+        print(f"  holes: {r['method']:<38} RMS {r['rms_pct']:.4f} %  {r['seconds']:.2f} s")
+    print(f"  wrote {paths['html']} and {paths['markdown']}")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from .evaluate.report import load_compare, write_summary
+
+    results = [load_compare(p) for p in args.inputs]
+    out = Path(args.output)
+    links = []
+    for p in args.inputs:
+        page = (Path(p) if Path(p).is_dir() else Path(p).parent) / "report.html"
+        links.append(os.path.relpath(page, out) if page.exists() else None)
+    paths = write_summary(results, out, links)
+    if args.json:
+        print(paths["json"].read_text(encoding="utf-8"))
+        return 0
+    print(paths["markdown"].read_text(encoding="utf-8"))
+    print(f"wrote {paths['html']}")
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     src = face_map_path()
     out = Path(args.output)
@@ -367,6 +415,26 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--samples-out", help="write every sample and its distance (.npz)")
     m.add_argument("--json", action="store_true", help="print the result as JSON")
     m.set_defaults(func=_cmd_metro)
+
+    c = sub.add_parser("compare", help="our reconstruction vs the SOM baseline (and holes, "
+                                       "LOD): tables, plots, HTML + Markdown report")
+    c.add_argument("scan", help="scan file with faces (range grid or mesh)")
+    c.add_argument("-o", "--output", required=True, help="output folder")
+    c.add_argument("--network", help="a network fitted to this scan (fitted here if omitted)")
+    c.add_argument("--holes", action="store_true",
+                   help="also the punched-hole benchmark (ours, TPS, Close Holes, Poisson)")
+    c.add_argument("--lod", action="store_true",
+                   help="also a 4-level LOD set with the quadric-decimation comparison")
+    c.add_argument("--no-meshes", action="store_true", help="do not write the two meshes")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--json", action="store_true", help="print the results as JSON")
+    c.set_defaults(func=_cmd_compare)
+
+    rp = sub.add_parser("report", help="one page over several `asrbf compare` results")
+    rp.add_argument("inputs", nargs="+", help="compare output folders (or compare.json files)")
+    rp.add_argument("-o", "--output", required=True, help="output folder")
+    rp.add_argument("--json", action="store_true", help="print the summary as JSON")
+    rp.set_defaults(func=_cmd_report)
 
     d = sub.add_parser("demo", help="fit the face range map shipped with pymeshlab")
     d.add_argument("-o", "--output", default="asrbf-demo", help="output folder [asrbf-demo]")
