@@ -314,6 +314,19 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_filter_script(args: argparse.Namespace) -> int:
+    from meshlab_filter import run_script_file
+
+    res = run_script_file(args.script, args.input, args.output)
+    if args.json:
+        print(json.dumps(res, default=str))
+    else:
+        print(f"ran {len(res['steps'])} steps of {args.script} on {args.input}; "
+              f"wrote {args.output} ({res['saved']['vertices']:,} vertices, "
+              f"{res['saved']['faces']:,} faces) in {res['seconds']:.2f} s")
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     src = face_map_path()
     out = Path(args.output)
@@ -435,6 +448,13 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("-o", "--output", required=True, help="output folder")
     rp.add_argument("--json", action="store_true", help="print the summary as JSON")
     rp.set_defaults(func=_cmd_report)
+
+    fs = sub.add_parser("filter-script", help="run a JSON list of pymeshlab and asrbf filters")
+    fs.add_argument("script", help="JSON list of steps: {\"filter\": NAME, \"params\": {...}}")
+    fs.add_argument("input", help="mesh or scan file (loaded by pymeshlab)")
+    fs.add_argument("-o", "--output", required=True, help="where the current mesh is saved")
+    fs.add_argument("--json", action="store_true", help="print the run as JSON")
+    fs.set_defaults(func=_cmd_filter_script)
 
     d = sub.add_parser("demo", help="fit the face range map shipped with pymeshlab")
     d.add_argument("-o", "--output", default="asrbf-demo", help="output folder [asrbf-demo]")

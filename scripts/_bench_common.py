@@ -89,3 +89,26 @@ def write_section(name: str, body: str, path: Path = ROOT / "BENCHMARKS.md") -> 
     tmp = path.with_suffix(".md.tmp")
     tmp.write_text(text)
     tmp.replace(path)
+
+
+def subsample(scan: am.Scan, n: int, seed: int = 0) -> np.ndarray:
+    """``n`` points of ``scan`` drawn at random without replacement, (n, 3)."""
+    rng = np.random.default_rng(seed)
+    return scan.points[np.sort(rng.choice(scan.n_points, n, replace=False))]
+
+
+def best_time(fn: Callable, *args, repeat: int = 3, **kw) -> float:
+    """Fastest of ``repeat`` timed calls of ``fn`` (seconds), after one untimed call."""
+    fn(*args, **kw)
+    return min(timed(fn, *args, **kw)[1] for _ in range(repeat))
+
+
+def save_png(fig, path: Path, dpi: int = 110) -> None:
+    """Save a matplotlib figure as PNG through a temporary file, then close it."""
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
+    tmp.replace(path)
+    plt.close(fig)

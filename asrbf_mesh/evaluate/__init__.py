@@ -7,5 +7,7 @@
 from __future__ import annotations
 
 from .metro import Direction, MetroResult, metro
+from .som import SomComparison, SomMap, compare_som, network_vertices, som_grid, train_som
 
-__all__ = ["Direction", "MetroResult", "metro"]
+__all__ = ["Direction", "MetroResult", "SomComparison", "SomMap", "compare_som", "metro",
+           "network_vertices", "som_grid", "train_som"]
