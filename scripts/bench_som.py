@@ -1,6 +1,6 @@
 """ASRBF vs SOM at equal node counts (paper section 5.4) on the benchmark scans.
 
-Run from /work/main:  .venv/bin/python /tmp/bench_som.py [--seed 0] [scan ...]
+Run from the repository root:  python scripts/bench_som.py [--seed 0] [--json OUT.json] [scan ...]
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path.cwd() / "scripts"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 from _bench_common import scans, table  # noqa: E402
