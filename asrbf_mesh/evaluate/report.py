@@ -103,8 +103,7 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
         raise AsrbfError("compare: lod=True needs lod_dir")
     steps = ["fit", "SOM baseline", *(["hole benchmark"] if holes else []),
              *(["LOD set"] if lod else [])]
-    show = progress if progress is not None else None
-    bar = tqdm(total=len(steps), desc="compare", unit="step", disable=show is False,
+    bar = tqdm(total=len(steps), desc="compare", unit="step", disable=progress is False,
                leave=False)
     label = name or (Path(scan.source).stem if scan.source else "scan")
     times: dict[str, float] = {}
