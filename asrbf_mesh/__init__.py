@@ -28,10 +28,10 @@ from ._version import __version__
 from .config import FitConfig
 from .errors import AsrbfError, ConfigError, FitError, NetworkFileError, ScanError
 from .footprint import Footprint
-from .frame import Frame, HeightField, HeightFieldWarning, to_height_field
+from .frame import DuplicatePointsWarning, Frame, HeightField, HeightFieldWarning, to_height_field
 from .holes import FillResult, HoleInfo, fill_holes, punch_holes
 from .io import Scan, face_map_path, load_scan, save_mesh
-from .learn import fit, learn
+from .learn import NeuronCapWarning, fit, learn
 from .lod import LodLevel, lod_set, write_lod_set
 from .mesh import Mesh
 from .network import FitLog, Network, NeuronStats
@@ -42,6 +42,7 @@ __all__ = [
     "evaluate",
     "AsrbfError",
     "ConfigError",
+    "DuplicatePointsWarning",
     "FillResult",
     "FitConfig",
     "FitError",
@@ -55,6 +56,7 @@ __all__ = [
     "Mesh",
     "Network",
     "NetworkFileError",
+    "NeuronCapWarning",
     "NeuronStats",
     "Scan",
     "ScanError",

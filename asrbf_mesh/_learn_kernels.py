@@ -86,7 +86,8 @@ ST_DIVERGED = 8  # neurons removed by the numerical guard
 ST_NLOG = 9
 ST_WPOS = 10
 ST_WCOUNT = 11
-ST_SIZE = 12
+ST_CAPPED = 12  # insertions the neuron cap (max_neurons) refused
+ST_SIZE = 13
 
 # status returned by run_steps
 DONE, NEED_SLOTS, NEED_LOG = 0, 1, 2
@@ -535,7 +536,10 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
             D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** st[ST_K], cf[CF_DMIN])
 
         near, dist = _nearest(x, y, W, cf, ci, c_head, c_nxt)
-        grow = dist > D and abs(r) > E and rms > EW and st[ST_K] < ci[CI_MAXK]
+        grow = dist > D and abs(r) > E and rms > EW
+        if grow and st[ST_K] >= ci[CI_MAXK]:
+            st[ST_CAPPED] += 1
+            grow = False
         if grow:
             if st[ST_NFREE] > 0:
                 st[ST_NFREE] -= 1

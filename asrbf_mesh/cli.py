@@ -9,7 +9,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 from typing import Any
@@ -17,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from ._atomic import check_output_path
+from ._atomic import check_output_dir, check_output_path
 from .config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
 from .errors import AsrbfError
 from .frame import VIEW_AXES
@@ -129,6 +131,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix.lower() != ".asrbf":
         raise AsrbfError(f"{out}: a network file must end in .asrbf")
+    check_output_path(out, args.scan)  # before the fit, not after it
     net = fit(scan, cfg, seed=args.seed, view_axis=args.view_axis,
               progress=None if not args.json else False)
     net.save(out, float32=args.float32, inputs=(args.scan,))
@@ -208,6 +211,7 @@ def _cmd_fill_holes(args: argparse.Namespace) -> int:
 
 def _cmd_lod(args: argparse.Namespace) -> int:
     scan = load_scan(args.scan)
+    check_output_dir(args.output)
     levels = lod_set(scan, levels=args.levels, method=args.method, seed=args.seed)
     manifest = write_lod_set(scan, levels, args.output, compare_qem=args.compare_qem,
                              metro=not args.no_metro)
@@ -237,6 +241,9 @@ def _cmd_metro(args: argparse.Namespace) -> int:
         check_output_path(x, args.mesh, args.reference)
     if args.samples_out and not args.samples_out.lower().endswith(".npz"):
         raise AsrbfError(f"{args.samples_out}: the samples file must end in .npz")
+    if args.error_mesh and b.faces is None:
+        raise AsrbfError(f"{args.reference}: a point cloud without faces; --error-mesh needs "
+                         "a mesh reference (point distances measure the cloud's gaps)")
     res = metro(a, b if b.faces is not None else b.points, samples=args.samples,
                 seed=args.seed, per_sample=bool(outs))
     if args.error_mesh:
@@ -271,12 +278,11 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from .evaluate.report import compare, write_compare
 
     scan = load_scan(args.scan)
-    out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        raise AsrbfError(f"{out}: exists and is not a folder")
+    out = check_output_dir(args.output)
     net = Network.load(args.network) if args.network else None
     c = compare(scan, net=net, seed=args.seed, holes=args.holes, lod=args.lod,
-                lod_dir=out / "lod", progress=False if args.json else None)
+                lod_dir=out / "lod", som_iterations=args.som_iterations,
+                progress=False if args.json else None)
     paths = write_compare(c, out, meshes=not args.no_meshes)
     d = c.to_dict()
     if args.json:
@@ -300,7 +306,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from .evaluate.report import load_compare, write_summary
 
     results = [load_compare(p) for p in args.inputs]
-    out = Path(args.output)
+    out = check_output_dir(args.output)
     links = []
     for p in args.inputs:
         page = (Path(p) if Path(p).is_dir() else Path(p).parent) / "report.html"
@@ -439,6 +445,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--lod", action="store_true",
                    help="also a 4-level LOD set with the quadric-decimation comparison")
     c.add_argument("--no-meshes", action="store_true", help="do not write the two meshes")
+    c.add_argument("--som-iterations", type=int, metavar="N",
+                   help="SOM training steps (default 500 per node; fewer run faster)")
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--json", action="store_true", help="print the results as JSON")
     c.set_defaults(func=_cmd_compare)
@@ -467,13 +475,27 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"asrbf: warning: {message}", file=sys.stderr)
 
 
+class _Terminated(BaseException):
+    """SIGTERM, raised as an exception so that partial outputs are removed on the way out."""
+
+
+def _terminate(signum: int, frame: Any) -> None:
+    raise _Terminated
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``asrbf`` command; returns the exit code."""
     args = build_parser().parse_args(argv)
+    handler = None
+    if threading.current_thread() is threading.main_thread():
+        handler = signal.signal(signal.SIGTERM, _terminate)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
             return int(args.func(args))
+    except _Terminated:
+        print("asrbf: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except AsrbfError as exc:
         print(f"asrbf: error: {exc}", file=sys.stderr)
         return 2
@@ -482,6 +504,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("asrbf: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if handler is not None:
+            signal.signal(signal.SIGTERM, handler)
 
 
 if __name__ == "__main__":  # pragma: no cover

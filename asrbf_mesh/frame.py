@@ -16,9 +16,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ScanError
+from .io import _collinear_xy
 
-__all__ = ["Frame", "HeightField", "HeightFieldWarning", "to_height_field", "fold_fraction",
-           "sampling_spacing", "VIEW_AXES"]
+__all__ = ["Frame", "HeightField", "HeightFieldWarning", "DuplicatePointsWarning",
+           "to_height_field", "fold_fraction", "duplicate_fraction", "sampling_spacing",
+           "VIEW_AXES"]
 
 ViewAxis = Literal["z", "x", "y", "pca"]
 VIEW_AXES = ("z", "x", "y", "pca")
@@ -33,6 +35,10 @@ _AXES = {
 
 class HeightFieldWarning(UserWarning):
     """The data is far from a single-valued height field in the chosen frame."""
+
+
+class DuplicatePointsWarning(UserWarning):
+    """Many points are exact copies of others: they weigh more in the fit."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,10 +165,30 @@ def sampling_spacing(xy: np.ndarray, *, max_samples: int = 50_000, seed: int = 0
     d, _ = tree.query(q, k=min(4, len(xy)))
     d = d[:, 1:]
     d = np.where(d > 0, d, np.inf).min(axis=1)
-    d = d[np.isfinite(d)]
-    if d.size == 0:
-        raise ScanError("all points share the same (x, y): no sampling spacing")
+    if not np.isfinite(d).all():
+        # some point has only copies among its nearest neighbours: measure the distinct
+        # positions instead (a scan without such copies keeps its exact spacing)
+        distinct = np.unique(xy, axis=0)
+        if len(distinct) < 2:
+            raise ScanError("all points share the same (x, y): no sampling spacing")
+        if len(distinct) < len(xy):
+            return sampling_spacing(distinct, max_samples=max_samples, seed=seed)
+        d = d[np.isfinite(d)]
     return float(np.median(d))
+
+
+def duplicate_fraction(points: np.ndarray) -> float:
+    """Fraction of the (N, D) rows that repeat an earlier row exactly.
+
+    Examples
+    --------
+    >>> duplicate_fraction(np.array([[0.0, 1.0], [2.0, 3.0], [0.0, 1.0], [0.0, 1.0]]))
+    0.5
+    """
+    if len(points) < 2:
+        return 0.0
+    rows = points[np.lexsort(points.T[::-1])]
+    return float(np.all(rows[1:] == rows[:-1], axis=1).sum() / len(points))
 
 
 def fold_fraction(local: np.ndarray, *, max_slope: float = 20.0, k: int = 6,
@@ -205,7 +231,9 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
         Depth direction: a world axis, or the smallest principal axis.
     warn_fraction : float
         Emit :class:`HeightFieldWarning` when more than this fraction of the points
-        lie on a fold of the surface in this frame (see :func:`fold_fraction`).
+        lie on a fold of the surface in this frame (see :func:`fold_fraction`), and
+        :class:`DuplicatePointsWarning` when more than this fraction are exact copies
+        of other points (see :func:`duplicate_fraction`).
 
     Returns
     -------
@@ -214,7 +242,8 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
     Raises
     ------
     ScanError
-        If x or y has zero extent in the chosen frame, or the points are not finite.
+        If x or y has zero extent in the chosen frame, all points lie on one line in
+        (x, y), or the points are not finite.
 
     Examples
     --------
@@ -241,6 +270,10 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
             raise ScanError(
                 f"zero {name} extent in the {view_axis!r} view frame: a height field needs "
                 "an x and a y extent (try another --view-axis)")
+    if _collinear_xy(local[:, :2]):
+        raise ScanError(
+            f"all points lie on one line in (x, y) of the {view_axis!r} view frame: a height "
+            "field needs points spread over an area (try another --view-axis)")
     if span[2] <= tiny:
         span[2] = 1.0  # flat scan: valid, depth maps to 0
     frame = Frame(rot, lo, span, view_axis)
@@ -255,4 +288,10 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
             f"{view_axis!r} axis (several depths at one x, y): the data is not a height field "
             "in this frame; try --view-axis pca or another axis",
             HeightFieldWarning, stacklevel=2)
+    dup = duplicate_fraction(pts)
+    if dup > warn_fraction:
+        warnings.warn(
+            f"{100 * dup:.0f}% of the points are exact copies of other points: each copy "
+            "counts again in the fit and in E-bar (remove duplicates to weigh every sample "
+            "once)", DuplicatePointsWarning, stacklevel=2)
     return HeightField(xy, z, frame, spacing)

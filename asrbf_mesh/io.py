@@ -391,13 +391,34 @@ def _list_property(element: plyfile.PlyElement, names: Iterable[str]) -> str:
 def _read_ply(path: Path) -> _Parsed:
     """Parse a PLY file (ASCII or binary) with :mod:`plyfile`."""
     fast = {"face": {"vertex_indices": 3, "vertex_index": 3}}
-    try:
-        ply = plyfile.PlyData.read(str(path), mmap="r", known_list_len=fast)
-    except plyfile.PlyElementParseError as exc:
-        if exc.message != "unexpected list length":
-            raise
-        # Polygons of several sizes: no memory-mapped fast path, read row by row.
-        ply = plyfile.PlyData.read(str(path), mmap="r")
+    with open(path, "rb") as fh:
+        try:
+            try:
+                ply = plyfile.PlyData.read(fh, mmap="r", known_list_len=fast)
+            except plyfile.PlyElementParseError as exc:
+                if exc.message != "unexpected list length":
+                    raise
+                # Polygons of several sizes: no memory-mapped fast path, read row by row.
+                fh.seek(0)
+                ply = plyfile.PlyData.read(fh, mmap="r")
+        except plyfile.PlyElementParseError as exc:
+            if exc.message != "early end-of-file" or exc.element is None:
+                raise
+            raise _ParseError(
+                f"{_one_line(exc)}: the header announces {exc.element.count} "
+                f"'{exc.element.name}' rows (file truncated, or the header's counts are wrong)"
+            ) from None
+        if not ply.text:
+            # plyfile stops after the announced elements: data left over (more than the
+            # blank or NUL padding some writers append) means that the header's counts
+            # do not describe the file.
+            extra = os.fstat(fh.fileno()).st_size - fh.tell()
+            if extra > 0 and fh.read().strip(b" \t\r\n\x00"):
+                counts = ", ".join(f"{e.count} {e.name}" for e in ply.elements)
+                raise _ParseError(
+                    f"{_plural(extra, 'byte')} after the elements the header announces "
+                    f"({counts}): the header's counts do not match the data"
+                )
 
     names = [e.name for e in ply.elements]
     if "vertex" not in names:
@@ -629,11 +650,30 @@ def _read_xyz(path: Path) -> _Parsed:
         if re.fullmatch(r"\d+", stripped):
             lines[i] = ""
         break
-    lines = [ln for ln in lines if ln.strip()]
-    if not lines:
+    numbered = [(i, ln) for i, ln in enumerate(lines, start=1) if ln.split("#", 1)[0].strip()]
+    if not numbered:
         return np.empty((0, 3)), None, None
-    points = np.loadtxt(lines, dtype=np.float64, comments="#", usecols=(0, 1, 2), ndmin=2)
+    body = [ln for _, ln in numbered]
+    try:
+        points = np.loadtxt(body, dtype=np.float64, comments="#", usecols=(0, 1, 2), ndmin=2)
+    except ValueError:
+        _raise_bad_xyz_line(numbered)
+        raise
     return points, None, None
+
+
+def _raise_bad_xyz_line(numbered: list[tuple[int, str]]) -> None:
+    """Raise :class:`_ParseError` naming the first line that is not ``x y z ...`` numbers."""
+    for lineno, line in numbered:
+        tokens = line.split("#", 1)[0].split()
+        if len(tokens) < 3:
+            raise _ParseError(f"line {lineno}: expected x y z, got {_plural(len(tokens), 'value')}")
+        for token in tokens[:3]:
+            try:
+                float(token)
+            except ValueError:
+                shown = token if len(token) <= 20 else token[:17] + "..."
+                raise _ParseError(f"line {lineno}: {shown!r} is not a number") from None
 
 
 def _read_npy(path: Path) -> _Parsed:
@@ -663,7 +703,9 @@ _READERS: dict[str, Callable[[Path], _Parsed]] = {
 # --------------------------------------------------------------------------- load_scan
 
 
-def load_scan(path: str | os.PathLike[str], *, min_points: int = 10) -> Scan:
+def load_scan(
+    path: str | os.PathLike[str], *, min_points: int = 10, height_field: bool = True
+) -> Scan:
     """Load a range scan or mesh file as a :class:`Scan`.
 
     Parameters
@@ -692,6 +734,10 @@ def load_scan(path: str | os.PathLike[str], *, min_points: int = 10) -> Scan:
             An (N, 3) or (N, >=3) real array; the first three columns are used.
     min_points : int, default 10
         Fewest points accepted.
+    height_field : bool, default True
+        Also reject points that cannot make a height field over (x, y): all identical,
+        no x or y extent, or all on one line in (x, y). ``False`` checks the file only
+        (for a mesh of any shape).
 
     Returns
     -------
@@ -703,10 +749,12 @@ def load_scan(path: str | os.PathLike[str], *, min_points: int = 10) -> Scan:
     ------
     ScanError
         One line starting with ``path`` if the file is missing, a directory, empty,
-        of an unknown format, unreadable or corrupt (including truncated data), has
-        faces indexing missing vertices, NaN or infinite coordinates, fewer than
-        ``min_points`` points, or no extent in x or in y (a height field needs both;
-        a zero z extent, a flat scan, is fine).
+        of an unknown format, unreadable or corrupt (including truncated data and a
+        binary PLY whose header counts do not match its data), has faces indexing
+        missing vertices, NaN or infinite coordinates, fewer than ``min_points``
+        points, or (with ``height_field``) points all identical, with no extent in x
+        or in y, or all on one line in (x, y) (a height field needs an area; a zero z
+        extent, a flat scan, is fine).
     ConfigError
         If ``min_points`` is less than 1.
     """
@@ -757,14 +805,42 @@ def load_scan(path: str | os.PathLike[str], *, min_points: int = 10) -> Scan:
     if len(points) < min_points:
         n_pts = _plural(len(points), "point")
         raise ScanError(f"{name}: only {n_pts}, at least {min_points} needed")
+    if height_field:
+        _check_footprint(points, name)
+    return Scan(points=points, faces=faces, source=name, grid_shape=grid_shape)
+
+
+def _collinear_xy(xy: np.ndarray) -> bool:
+    """Whether (N, 2) points lie on one line, up to rounding of their coordinates.
+
+    The RMS distance from the best-fitting line (the smaller principal axis) is
+    compared with the longer one and with the float64 resolution at the points'
+    magnitude, so that a shift of the whole scan by 1e12 changes nothing.
+    """
+    if len(xy) < 3:
+        return True
+    centred = xy - xy.mean(axis=0)
+    hi, lo = np.linalg.svd(centred, compute_uv=False) / np.sqrt(len(xy))
+    resolution = 64 * np.finfo(np.float64).eps * float(np.abs(xy).max())
+    return bool(lo <= max(1e-9 * hi, resolution))
+
+
+def _check_footprint(points: np.ndarray, name: str) -> None:
+    """Raise :class:`ScanError` unless the points spread over an area in (x, y)."""
     extent = np.ptp(points, axis=0)
+    if not extent.any():
+        raise ScanError(f"{name}: all {_plural(len(points), 'point')} are identical")
     for axis, coord in ((0, "x"), (1, "y")):
         if extent[axis] == 0:
             raise ScanError(
                 f"{name}: all points share the same {coord} (zero {coord} extent); "
                 "a height field needs an x and a y extent"
             )
-    return Scan(points=points, faces=faces, source=name, grid_shape=grid_shape)
+    if _collinear_xy(points[:, :2]):
+        raise ScanError(
+            f"{name}: all points lie on one line in (x, y); "
+            "a height field needs points spread over an area in x and y"
+        )
 
 
 # --------------------------------------------------------------------------- save_mesh

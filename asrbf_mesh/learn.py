@@ -26,6 +26,7 @@ import hashlib
 import math
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -40,7 +41,13 @@ from .frame import HeightField, to_height_field
 from .io import Scan
 from .network import FitLog, Network
 
-__all__ = ["fit", "learn", "auto_d_min", "residuals", "MIN_POINTS", "LearnedState"]
+__all__ = ["fit", "learn", "auto_d_min", "residuals", "MIN_POINTS", "LearnedState",
+           "NeuronCapWarning"]
+
+
+class NeuronCapWarning(UserWarning):
+    """The neuron cap (``FitConfig.max_neurons``) stopped the network's growth."""
+
 
 MIN_POINTS = 10
 _CENTRE_BOX = (-0.25, 1.25)
@@ -285,7 +292,14 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     log = FitLog(state.log_t[:nl].copy(), state.log_k[:nl].copy(), state.log_rms[:nl].copy(),
                  state.log_sig[:nl].copy(), state.log_amp[:nl].copy(),
                  added=int(st[_lk.ST_ADDED]), pruned=int(st[_lk.ST_PRUNED]),
-                 reset=int(st[_lk.ST_RESET]), diverged=int(st[_lk.ST_DIVERGED]))
+                 reset=int(st[_lk.ST_RESET]), diverged=int(st[_lk.ST_DIVERGED]),
+                 capped=int(st[_lk.ST_CAPPED]))
+    if log.capped:
+        warnings.warn(
+            f"the neuron cap stopped growth at K = {cfg.max_neurons}: {log.capped:,} "
+            "insertions the novelty criteria asked for were refused, so the fit is coarser "
+            "than the data allow (raise max_neurons / --max-neurons for more detail)",
+            NeuronCapWarning, stacklevel=3)
     W = state.W[alive]
     return LearnedState(float(state.fs[_lk.FS_A0]), W[:, 2:4].copy(), W[:, 1].copy(),
                         W[:, 0].copy(), log, float(d_min), int(st[_lk.ST_T]), seconds)

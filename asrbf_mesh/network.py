@@ -22,6 +22,7 @@ from ._atomic import atomic_path, check_output_path
 from .config import FitConfig
 from .errors import AsrbfError, NetworkFileError
 from .frame import Frame
+from .io import _one_line
 
 __all__ = ["Network", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
 
@@ -80,6 +81,9 @@ class FitLog:
     added, pruned, reset, diverged : int
         Neurons added, pruned, covariance blocks reset and neurons removed by the
         numerical guard over the whole run.
+    capped : int
+        Insertions the neuron cap (``FitConfig.max_neurons``) refused: the three novelty
+        criteria held but K was at the cap.
     """
 
     step: np.ndarray
@@ -91,13 +95,14 @@ class FitLog:
     pruned: int = 0
     reset: int = 0
     diverged: int = 0
+    capped: int = 0
 
     _ARRAYS = ("step", "n_neurons", "rms", "mean_width", "mean_weight")
 
     def counters(self) -> dict[str, int]:
         """Return the scalar counters as a dict."""
         return {"added": self.added, "pruned": self.pruned, "reset": self.reset,
-                "diverged": self.diverged}
+                "diverged": self.diverged, "capped": self.capped}
 
 
 @dataclass(frozen=True)
@@ -356,6 +361,13 @@ class Network:
         if p.is_dir():
             raise NetworkFileError(f"{p}: is a directory, not a network file")
         try:
+            with open(p, "rb") as fh:
+                magic = fh.read(4)
+        except OSError as exc:
+            raise NetworkFileError(f"{p}: cannot read ({exc.strerror})") from None
+        if not magic:
+            raise NetworkFileError(f"{p}: not an asrbf network file (empty file, 0 bytes)")
+        try:
             with zipfile.ZipFile(p) as zf:
                 names = set(zf.namelist())
                 if "meta.npy" not in names:
@@ -369,9 +381,15 @@ class Network:
         except NetworkFileError:
             raise
         except zipfile.BadZipFile:
+            if magic == b"PK\x03\x04":  # starts like a zip: damaged or cut short
+                raise NetworkFileError(
+                    f"{p}: corrupt or truncated network file (the zip archive is damaged)"
+                ) from None
             raise NetworkFileError(f"{p}: not an asrbf network file (not a zip archive)") from None
+        except OSError as exc:
+            raise NetworkFileError(f"{p}: cannot read ({exc.strerror or _one_line(exc)})") from None
         except Exception as exc:  # corrupt member, truncated data, ...
-            raise NetworkFileError(f"{p}: corrupt network file ({exc})") from None
+            raise NetworkFileError(f"{p}: corrupt network file ({_one_line(exc)})") from None
         try:
             meta = json.loads(bytes(arrays["meta"]).decode())
         except Exception:
@@ -396,4 +414,4 @@ class Network:
                        arrays["weights"], Frame.from_dict(meta["frame"]),
                        FitConfig.from_dict(meta["config"]), log, dict(meta.get("info") or {}))
         except (KeyError, ValueError, TypeError, AsrbfError) as exc:
-            raise NetworkFileError(f"{p}: corrupt network file ({exc})") from None
+            raise NetworkFileError(f"{p}: corrupt network file ({_one_line(exc)})") from None

@@ -41,6 +41,7 @@ import pymeshlab
 
 from asrbf_mesh._atomic import atomic_path, check_output_path
 from asrbf_mesh.errors import AsrbfError
+from asrbf_mesh.io import SUPPORTED_SCAN_FORMATS, load_scan
 from asrbf_mesh.lod import _jsonable
 
 from ._filters import apply_filter, filter_list
@@ -213,7 +214,10 @@ def run_script_file(script_path: str | os.PathLike, in_path: str | os.PathLike,
     Loads ``in_path`` with pymeshlab's ``load_new_mesh`` into a new MeshSet, runs the
     script (:func:`run_script`), and saves the current mesh to ``out_path`` with
     ``save_current_mesh`` (format from the extension) atomically: to a temporary name
-    in the same folder, then renamed. ``in_path`` is never written.
+    in the same folder, then renamed. ``in_path`` is never written. A file pymeshlab
+    loads in a format :func:`asrbf_mesh.load_scan` reads is also checked by it (not its
+    shape), so that an empty or non-numeric file or NaN coordinates fail with the same
+    message as in the other commands instead of running on a partial or empty mesh.
 
     Parameters
     ----------
@@ -235,7 +239,7 @@ def run_script_file(script_path: str | os.PathLike, in_path: str | os.PathLike,
     ------
     AsrbfError
         One line starting with the file concerned: a missing or malformed script, an
-        unreadable input, an output path that is a directory, in a missing folder or an
+        unreadable or corrupt input, an output path that is a directory, in a missing folder or an
         input, a failing step (``<script>: step <i> (<filter>): ...``), a failed save.
     """
     t0 = time.perf_counter()
@@ -245,10 +249,15 @@ def run_script_file(script_path: str | os.PathLike, in_path: str | os.PathLike,
         raise AsrbfError(f"{src}: no such file" if not src.exists() else f"{src}: not a file")
     check_output_path(out, src, script)
     ms = pymeshlab.MeshSet()
+    cwd = os.getcwd()
     try:
         ms.load_new_mesh(str(src))
     except Exception as exc:  # pymeshlab's loaders raise PyMeshLabException and friends
         raise AsrbfError(f"{src}: cannot load ({_one_line(exc)})") from None
+    finally:
+        os.chdir(cwd)  # a failed load leaves pymeshlab in the file's folder
+    if src.suffix.lower() in SUPPORTED_SCAN_FORMATS:  # what pymeshlab let through
+        load_scan(in_path, min_points=1, height_field=False)
     try:
         results = _run(ms, steps)
     except ScriptError as exc:

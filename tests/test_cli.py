@@ -79,11 +79,13 @@ def test_fit_json(capsys, scan_file: Path, tmp_path: Path) -> None:
 
 def test_fit_options_reach_the_config(capsys, scan_file: Path, tmp_path: Path) -> None:
     out = tmp_path / "n.asrbf"
-    code, _, _ = run(capsys, "fit", scan_file, "-o", out, "--json", "--passes", "1",
-                     "--error-threshold", "0.02", "--d-min", "0.05", "--window", "300",
-                     "--update", "gd", "--pruning", "literal", "--decay", "observation",
-                     "--max-neurons", "25", "--float32")
+    code, _, err = run(capsys, "fit", scan_file, "-o", out, "--json", "--passes", "1",
+                       "--error-threshold", "0.02", "--d-min", "0.05", "--window", "300",
+                       "--update", "gd", "--pruning", "literal", "--decay", "observation",
+                       "--max-neurons", "25", "--float32")
     assert code == 0
+    assert err.startswith("asrbf: warning: the neuron cap stopped growth at K = 25: ")
+    assert len(err.splitlines()) == 1
     net = am.Network.load(out)
     c = net.config
     assert (c.error_threshold, c.d_min, c.window, c.update, c.pruning, c.max_neurons) == (

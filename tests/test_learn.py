@@ -7,6 +7,8 @@ Thresholds carry a margin over the values measured when these tests were written
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -145,13 +147,22 @@ def test_literal_eq4_decay_stalls(franke_points) -> None:
     assert observation.info["ebar"] < literal.info["ebar"]
 
 
-def test_max_neurons_caps_k(franke39) -> None:
+def test_max_neurons_caps_k_with_a_warning(franke39) -> None:
     for cap in (5, 20):
-        net = fit(franke39, max_neurons=cap, pruning="none", **SEQ)
+        with pytest.warns(am.NeuronCapWarning, match=f"stopped growth at K = {cap}: "):
+            net = fit(franke39, max_neurons=cap, pruning="none", **SEQ)
         assert net.n_neurons == cap
         assert net.log.n_neurons.max() <= cap
-    free = fit(franke39, pruning="none", **SEQ)
-    assert free.n_neurons > 20
+        assert net.log.capped > 0
+        assert net.log.counters()["capped"] == net.log.capped
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", am.NeuronCapWarning)
+        free = fit(franke39, pruning="none", **SEQ)
+        roomy = fit(franke39, pruning="none", max_neurons=free.n_neurons, **SEQ)
+    assert free.n_neurons > 20 and free.log.capped == 0
+    # a cap the fit never reaches changes nothing, bit for bit
+    assert roomy.log.capped == 0
+    np.testing.assert_array_equal(roomy.weights, free.weights)
 
 
 def test_error_threshold_above_the_depth_range_blocks_growth(franke40) -> None:
@@ -316,7 +327,9 @@ def test_bad_point_shapes(pts) -> None:
 
 def test_fit_accepts_a_scan_and_overrides(franke40) -> None:
     scan = am.Scan(franke40, source="memory.xyz")
-    net = fit(scan, FitConfig(passes=1), polish="none", max_neurons=30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", am.NeuronCapWarning)
+        net = fit(scan, FitConfig(passes=1), polish="none", max_neurons=30)
     assert net.info["source"] == "memory.xyz"
     assert net.config.passes == 1 and net.config.max_neurons == 30
     assert net.n_neurons <= 30

@@ -614,6 +614,45 @@ def test_run_script_file_errors_are_one_line_naming_the_file(files) -> None:
     assert not [p for p in os.listdir(d) if p.startswith(".")]  # no temporary file left
 
 
+def test_cli_filter_script(capsys, files) -> None:
+    from asrbf_mesh.cli import main
+
+    argv = ["filter-script", files["script"], files["src"], "-o", files["out"]]
+    assert main([str(a) for a in argv]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith(f"ran 2 steps of {files['script']} on {files['src']}; wrote ")
+    assert err == ""
+    first = files["out"].read_bytes()
+    files["out"].unlink()
+    assert main([str(a) for a in argv] + ["--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert [s["filter"] for s in res["steps"]] == ["meshing_close_holes_asrbf",
+                                                   "meshing_remove_unreferenced_vertices"]
+    assert files["out"].read_bytes() == first  # same input, same output, byte for byte
+
+
+@pytest.mark.parametrize("case", ["missing_script", "same_path", "failing_step"])
+def test_cli_filter_script_errors(capsys, files, case: str) -> None:
+    from asrbf_mesh.cli import main
+
+    script, src, out = files["script"], files["src"], files["out"]
+    if case == "missing_script":
+        script, match = files["dir"] / "none.json", "none.json: no such file"
+    elif case == "same_path":
+        out, match = src, "refusing to overwrite the input file"
+    else:
+        script = files["dir"] / "failing.json"
+        script.write_text(json.dumps([{"filter": "meshing_close_holes_asrbf",
+                                       "params": {"maxholesize": 5}}]))
+        match = "step 1"
+    code = main(["filter-script", str(script), str(src), "-o", str(out)])
+    stdout, err = capsys.readouterr()
+    assert code == 2 and stdout == ""
+    assert len(err.splitlines()) == 1 and err.startswith("asrbf: error: ")
+    assert match in err
+    assert not files["out"].exists()
+
+
 # ----------------------------------------------------------------------------- a session
 
 

@@ -150,7 +150,8 @@ def _as_surface(x: Mesh | Scan | np.ndarray, name: str,
             return x.to_mesh()
         if points_ok:
             return x.points
-        raise AsrbfError(f"metro: {name} is a point set without faces; it must be a mesh")
+        where = x.source or f"metro: {name}"
+        raise AsrbfError(f"{where}: is a point set without faces; it must be a mesh")
     if isinstance(x, Mesh):
         return x
     if points_ok:

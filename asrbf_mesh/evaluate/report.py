@@ -15,6 +15,7 @@ import base64
 import html
 import json
 import os
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -61,7 +62,7 @@ def _metro_dict(r: Any) -> dict[str, Any]:
 
 def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, seed: int = 0,
             holes: bool = False, lod: bool = False, lod_dir: str | os.PathLike | None = None,
-            progress: bool | None = None) -> Comparison:
+            som_iterations: int | None = None, progress: bool | None = None) -> Comparison:
     """Compare our reconstruction of ``scan`` with the SOM baseline, and more on request.
 
     Parameters
@@ -79,6 +80,9 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
     lod, lod_dir : bool, path
         Also build a 4-level LOD set (``resample``) with the QEM comparison, written to
         ``lod_dir``.
+    som_iterations : int, optional
+        SOM training steps (default: :func:`~asrbf_mesh.evaluate.som.train_som`'s, 500 per
+        node; fewer steps give a faster, coarser baseline).
     progress : bool, optional
         A progress bar over the steps (default: on a terminal).
 
@@ -94,17 +98,20 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
     from tqdm.auto import tqdm
 
     from ..learn import fit
-    from .som import compare_som
+    from .som import _check_count, compare_som
 
     if scan.faces is None or len(scan.faces) == 0:
-        raise AsrbfError("compare needs a scan with faces (a range grid or mesh): the Metro "
-                         "reference is the scan's own mesh")
+        raise AsrbfError(f"{scan.source or 'scan'}: compare needs a scan with faces (a range "
+                         "grid or mesh): the Metro reference is the scan's own mesh")
     if lod and lod_dir is None:
         raise AsrbfError("compare: lod=True needs lod_dir")
+    if som_iterations is not None:
+        _check_count(som_iterations, "som_iterations", 1)
     steps = ["fit", "SOM baseline", *(["hole benchmark"] if holes else []),
              *(["LOD set"] if lod else [])]
-    bar = tqdm(total=len(steps), desc="compare", unit="step", disable=progress is False,
-               leave=False)
+    shown = progress if progress is not None else sys.stderr.isatty()
+    bar = tqdm(total=len(steps), desc="compare", unit="step", disable=not shown, leave=False,
+               file=sys.stderr)
     label = name or (Path(scan.source).stem if scan.source else "scan")
     times: dict[str, float] = {}
     try:
@@ -116,7 +123,7 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
         bar.update()
         bar.set_postfix_str("SOM baseline")
         t0 = time.perf_counter()
-        som = compare_som(scan, net, seed=seed)
+        som = compare_som(scan, net, seed=seed, iterations=som_iterations)
         times["som"] = time.perf_counter() - t0
         bar.update()
         data: dict[str, Any] = {
@@ -188,9 +195,14 @@ def _pictures(c: Comparison, img: Path) -> list[tuple[str, Path]]:
     out.append(("Distance of every scan point to each reconstruction, % of the bounding-box "
                 f"diagonal (colour scale capped at the 99th percentile, {top:.3f} %).", p))
     if c.data.get("lod"):
-        out.append(("LOD set: error against size, ours and quadric decimation.",
+        out.append(("LOD set: RMS error against the scan by face count and by stored size "
+                    "(all our levels come from one network file; decimations to the scan's "
+                    "own face count, which are the scan, are left off).",
                     _lod_plot(c.data["lod"], img / "lod.png")))
     return out
+
+
+_LOD_FLOOR = 1e-6  # % of the diagonal: below this a level is the scan itself
 
 
 def _lod_plot(manifest: dict[str, Any], path: Path) -> Path:
@@ -199,12 +211,13 @@ def _lod_plot(manifest: dict[str, Any], path: Path) -> Path:
     for q in manifest.get("qem") or []:
         series.setdefault(f"QEM {q['method']}", []).append(q)
     for label, rows in series.items():
-        rows = [r for r in rows if r.get("rms_pct") is not None]
+        # a decimation to the scan's own face count is the scan (error ~1e-15): off the plot
+        rows = [r for r in rows if r.get("rms_pct") is not None and r["rms_pct"] > _LOD_FLOOR]
         if not rows:
             continue
         ax[0].plot([r["faces"] for r in rows], [r["rms_pct"] for r in rows], "o-", label=label)
         ax[1].plot([r["bytes"] / 1024 for r in rows], [r["rms_pct"] for r in rows], "o-",
-                   label=label)
+                   label=label + (" (one network file)" if label.startswith("ASRBF") else ""))
     for a, xl in ((ax[0], "faces"), (ax[1], "size (KB)")):
         a.set_xscale("log")
         a.set_yscale("log")
@@ -353,18 +366,43 @@ def _json_default(o: Any) -> Any:
 
 
 def load_compare(path: str | os.PathLike) -> dict[str, Any]:
-    """Read a ``compare.json`` (or the folder holding it)."""
+    """Read a ``compare.json`` (or the folder holding it).
+
+    Raises
+    ------
+    AsrbfError
+        ``<path>: <problem>``: a missing or unreadable file, or one that is not JSON or
+        lacks a figure :func:`write_summary` reads.
+    """
     p = Path(path)
     if p.is_dir():
         p = p / "compare.json"
     try:
-        d = json.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise AsrbfError(f"{p}: no such file (run `asrbf compare` first)") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise AsrbfError(f"{p}: not a compare.json ({exc})") from None
+    except UnicodeDecodeError:
+        raise AsrbfError(f"{p}: not a compare.json (not UTF-8 text)") from None
+    except OSError as exc:
+        raise AsrbfError(f"{p}: cannot read ({exc.strerror})") from None
+    if not text.strip():
+        raise AsrbfError(f"{p}: not a compare.json (empty file)")
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise AsrbfError(f"{p}: not a compare.json (invalid JSON: {exc})") from None
     if not isinstance(d, dict) or not all(k in d for k in ("scan", "asrbf", "som")):
         raise AsrbfError(f"{p}: not a compare.json (keys scan, asrbf, som missing)")
+    if not isinstance(d["scan"], str):
+        raise AsrbfError(f"{p}: not a compare.json (scan is not a name)")
+    figures = {k: d.get(k) for k in ("n_points", "n_neurons", "som_nodes")}
+    for method in ("asrbf", "som"):
+        if not isinstance(d[method], dict):
+            raise AsrbfError(f"{p}: not a compare.json ({method} is not a table of figures)")
+        figures |= {f"{method}.{k}": d[method].get(k) for k in METRO_KEYS if k.endswith("_pct")}
+    for key, value in figures.items():  # what write_summary reads
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise AsrbfError(f"{p}: not a compare.json ({key} is missing or not a number)")
     return d
 
 
@@ -377,7 +415,10 @@ def write_summary(results: Sequence[dict[str, Any]], out_dir: str | os.PathLike,
     if not results:
         raise AsrbfError("report: no comparison to summarize")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise AsrbfError(f"{out}: cannot create the output folder ({exc.strerror})") from None
     keys = ("hausdorff_pct", "mean_pct", "rms_pct")
     rows, wins = [], 0
     for d in results:

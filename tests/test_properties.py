@@ -1,0 +1,113 @@
+"""Property tests (hypothesis): random height fields, scales, seeds and learning parameters.
+
+Whatever the data and the parameters, a fit yields finite parameters, positive widths,
+a finite surface, counters that add up, and an error no worse than the best constant.
+Same seed, same bytes, in another process too.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import asrbf_mesh as am
+
+PROPERTY = settings(max_examples=30, deadline=None, derandomize=True,
+                    suppress_health_check=[HealthCheck.too_slow])
+
+
+def height_field(seed: int, n: int, bumps: int, roughness: float, noise: float) -> np.ndarray:
+    """(n, 3) points of a random sum of Gaussian bumps and a ramp on the unit square."""
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2))
+    c = rng.random((bumps, 2))
+    a = rng.normal(0.0, 1.0, bumps)
+    s = rng.uniform(0.03, 0.5, bumps) / (1.0 + roughness)
+    d2 = ((xy[:, None, :] - c[None]) ** 2).sum(-1)
+    z = (a * np.exp(-d2 / (2 * s**2))).sum(1) + rng.normal(0, 0.3) * xy[:, 0]
+    z = z + noise * rng.standard_normal(n)
+    return np.column_stack([xy, z])
+
+
+fields = st.builds(height_field, seed=st.integers(0, 2**32 - 1), n=st.integers(30, 600),
+                   bumps=st.integers(0, 12), roughness=st.floats(0.0, 8.0),
+                   noise=st.sampled_from([0.0, 1e-3, 0.05]))
+scales = st.tuples(st.sampled_from([1e-6, 1e-3, 1.0, 250.0, 1e6]),  # x, y scale
+                   st.sampled_from([1e-3, 1.0, 40.0]),                # depth scale
+                   st.floats(-1e4, 1e4))                              # shift
+configs = st.fixed_dictionaries({
+    "error_threshold": st.sampled_from([0.001, 0.01, 0.05]),
+    "psi": st.floats(0.3, 1.5),
+    "d_max": st.sampled_from([0.2, 0.4, 0.8]),
+    "passes": st.integers(1, 2),
+    "update": st.sampled_from(["nekf", "nekf-neighbourhood", "gd"]),
+    "pruning": st.sampled_from(["none", "literal", "support"]),
+    "polish": st.sampled_from(["none", "weights", "full"]),
+    "measurement_noise": st.sampled_from([1e-4, 0.01, 1.0]),
+})
+
+
+@PROPERTY
+@given(pts=fields, scale=scales, cfg=configs, seed=st.integers(0, 2**31))
+def test_any_fit_is_finite_and_no_worse_than_a_constant(pts, scale, cfg, seed) -> None:
+    sxy, sz, shift = scale
+    pts = pts * np.array([sxy, sxy * 0.7, sz]) + shift
+    net = am.fit(pts, seed=seed, progress=False, **cfg)
+    for arr in (net.centers, net.widths, net.weights):
+        assert np.all(np.isfinite(arr))
+    assert np.isfinite(net.a0)
+    assert np.all(net.widths > 0)
+    log = net.log
+    assert log.added - log.pruned - log.diverged == net.n_neurons
+    assert np.all(np.isfinite(log.rms)) and np.all(np.isfinite(log.mean_width))
+    # evaluated anywhere in (and around) the data: finite
+    lo, hi = pts[:, :2].min(0), pts[:, :2].max(0)
+    q = lo + (hi - lo) * np.random.default_rng(seed).uniform(-0.5, 1.5, (500, 2))
+    assert np.all(np.isfinite(net.evaluate(q)))
+    # the error is bounded: no worse than the best constant (the median) by more than
+    # a margin
+    z = net.frame.to_unit(pts)[:, 2]
+    const = float(np.mean(np.abs(z - np.median(z))))
+    assert net.info["ebar"] <= 1.5 * const + 1e-9
+
+
+@PROPERTY
+@given(pts=fields, seed=st.integers(0, 2**31))
+def test_save_load_evaluate_is_exact(tmp_path_factory, pts, seed) -> None:
+    net = am.fit(pts, seed=seed, progress=False, passes=1)
+    path = net.save(tmp_path_factory.mktemp("rt") / "n.asrbf")
+    back = am.Network.load(path)
+    q = np.random.default_rng(seed).random((200, 2))
+    assert back.evaluate(q).tobytes() == net.evaluate(q).tobytes()
+    assert back.save(path.with_name("again.asrbf")).read_bytes() == path.read_bytes()
+
+
+def test_same_seed_same_bytes_in_another_process(tmp_path: Path, syn) -> None:
+    src = tmp_path / "franke.npy"
+    np.save(src, syn.franke_points(30))
+    outs = []
+    for run in ("a", "b"):
+        d = tmp_path / run
+        d.mkdir()
+        for argv in (["fit", src, "-o", d / "n.asrbf", "--seed", "5"],
+                     ["reconstruct", d / "n.asrbf", "-o", d / "s.ply", "--resolution", "50"]):
+            done = subprocess.run([sys.executable, "-m", "asrbf_mesh.cli", *map(str, argv)],
+                                  capture_output=True, text=True, timeout=300)
+            assert done.returncode == 0, done.stderr
+        outs.append([(d / f).read_bytes() for f in ("n.asrbf", "s.ply")])
+    assert outs[0] == outs[1]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_pickled_network_evaluates_identically(franke_net: am.Network, seed: int) -> None:
+    import pickle
+
+    back = pickle.loads(pickle.dumps(franke_net, protocol=pickle.HIGHEST_PROTOCOL))
+    q = np.random.default_rng(seed).random((300, 2)) * 80 + [100, 20]
+    assert back.evaluate(q).tobytes() == franke_net.evaluate(q).tobytes()
