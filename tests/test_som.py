@@ -98,6 +98,29 @@ def test_train_som_default_iterations_are_500_per_node(syn) -> None:
     assert som.shape == (2, 2) and som.iterations == 2_000
 
 
+@pytest.mark.parametrize(("n", "steps"), [(4, 300), (36, 4_000), (110, 3_000)])
+def test_train_som_equals_minisom_bit_for_bit(syn, n: int, steps: int) -> None:
+    # the compiled loop is MiniSom's algorithm: same start, schedule, winner and update
+    from minisom import MiniSom
+
+    pts = syn.points(syn.franke, 25)
+    rows, cols = som_grid(n)
+    centre = pts.mean(axis=0)
+    scale = np.sqrt(np.linalg.eigvalsh(np.cov(pts.T)).max())
+    x = (pts - centre) / scale
+    ref = MiniSom(rows, cols, 3, sigma=1.0, learning_rate=0.5,
+                  decay_function="asymptotic_decay", sigma_decay_function="asymptotic_decay",
+                  neighborhood_function="gaussian", topology="rectangular",
+                  activation_distance="euclidean", random_seed=0)
+    ref.pca_weights_init(x)
+    order = np.arange(steps) % len(x)
+    np.random.default_rng(7).shuffle(order)
+    for t in range(steps):
+        ref.update(x[order[t]], ref.winner(x[order[t]]), t, steps)
+    som = train_som(pts, n, seed=7, iterations=steps)
+    assert np.array_equal(som.nodes, ref.get_weights().reshape(-1, 3) * scale + centre)
+
+
 def test_som_nodes_stay_on_a_plane(syn) -> None:
     # PCA initialization puts the nodes on the data's plane; every update is a convex
     # step toward a point of it: the nodes never leave the plane
