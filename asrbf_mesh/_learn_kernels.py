@@ -502,8 +502,8 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
             log_t[nl] = t
             log_k[nl] = k
             log_rms[nl] = np.sqrt(fs[FS_WSUM] / max(st[ST_WCOUNT], 1))
-            log_sig[nl] = ssum / k if k > 0 else np.nan
-            log_amp[nl] = asum / k if k > 0 else np.nan
+            log_sig[nl] = ssum / k if k > 0 else 0.0  # no neuron yet: 0, never NaN
+            log_amp[nl] = asum / k if k > 0 else 0.0
             st[ST_NLOG] = nl + 1
 
         i = order[pos]

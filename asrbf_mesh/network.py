@@ -77,7 +77,7 @@ class FitLog:
     rms : (L,) float64 array
         Windowed RMS error e_n^omega (eq. 6), unit cube.
     mean_width, mean_weight : (L,) float64 arrays
-        Mean sigma and mean |a| over the alive neurons.
+        Mean sigma and mean |a| over the alive neurons (0 while there is none).
     added, pruned, reset, diverged : int
         Neurons added, pruned, covariance blocks reset and neurons removed by the
         numerical guard over the whole run.

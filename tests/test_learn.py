@@ -286,6 +286,10 @@ def test_fit_log_is_consistent(franke_net: am.Network) -> None:
     assert np.all(log.rms >= 0)
     grown = log.n_neurons > 0
     assert np.all(np.isfinite(log.mean_width[grown])) and np.all(log.mean_width[grown] > 0)
+    # before the first neuron (step 0) the means are 0, not NaN: the log is saved
+    assert log.n_neurons[0] == 0 and log.mean_width[0] == 0 and log.mean_weight[0] == 0
+    for name in ("rms", "mean_width", "mean_weight"):
+        assert np.all(np.isfinite(getattr(log, name)))
     assert log.added - log.pruned - log.diverged == franke_net.n_neurons
     # the windowed RMS error falls while the network grows
     assert log.rms[-1] < log.rms[n // 10 : n // 5].max()
