@@ -501,6 +501,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except BrokenPipeError:  # output piped into head & co.
         return 0
+    except MemoryError:
+        print("asrbf: error: out of memory (the input is too large for this machine; "
+              "a fit needs about 0.5 KB per point, see BENCHMARKS.md)", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("asrbf: interrupted", file=sys.stderr)
         return 130

@@ -424,8 +424,9 @@ def table_4(R: Runs) -> str:
     left = [n for n in full_scans(R) if n not in R.som_scans]
     return "\n".join([
         head,
-        "`asrbf_mesh.evaluate.som.compare_som` (seed 0): a SOM (MiniSom, 500 online steps per "
-        "node, dead nodes dropped) with about as many nodes as our network has neurons, on "
+        "`asrbf_mesh.evaluate.som.compare_som` (seed 0): a SOM (MiniSom's algorithm, "
+        "compiled; 500 online steps per node, dead nodes dropped) with about as many nodes "
+        "as our network has neurons, on "
         "the most square grid, and as many vertices sampled from our network over the scan's "
         "footprint; both meshed by ball pivoting and measured against the scan's own mesh by "
         "Metro, both ways, in % of the scan's bounding-box diagonal. *ours (default)* is the "

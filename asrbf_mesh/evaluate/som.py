@@ -243,8 +243,8 @@ def train_som(points: Scan | np.ndarray, n_nodes: int, *, seed: int = 0,
         Training steps. Default ``500 * rows * cols``: Kohonen's rule of thumb (at
         least 500 steps per node). Fewer cost the SOM accuracy (bun000, 1,560 nodes:
         100 steps per node give a Metro mean distance of 0.19 % vs 0.16 %). The
-        compiled loop runs 4-11 us a step for 730-3,140 nodes, 30-35 times faster
-        than MiniSom's Python steps (120-380 us; ``scripts/bench_som.py``): 1.5-18 s
+        compiled loop runs 4-13 us a step for 730-3,190 nodes, 25-30 times faster
+        than MiniSom's Python steps (110-380 us; ``scripts/bench_som.py``): 1.3-21 s
         at the default instead of 1-10 min.
     progress : bool, optional
         Progress bar on stderr (default: on a terminal, for runs over 50,000 steps).
