@@ -1,12 +1,12 @@
 """Peak memory of a fit against the number of points N: O(N + K), up to 2 million points.
 
-Run from the repository root:  python scripts/bench_memory.py [--sizes 250000 500000 1000000 2000000]
+Run from the repository root:  python scripts/bench_memory.py [--sizes N ...]
 
 Each size runs in a fresh process: a synthetic range scan (a sum of Gaussian bumps
 over 1,000 x 750 mm with 0.05 mm noise, points at random in (x, y)) is made, then fitted
 with the package defaults (seed 0). The process's peak RSS (``ru_maxrss``) is read
-after the imports, after the points exist and after the fit; the fit's own share is the
-peak minus the memory before the fit. A line fitted through (N, fit share) gives the
+at the end, and the resident set (``VmRSS``) after the imports and once the points exist;
+the fit's own share is the peak minus the resident set before the fit. A line fitted through (N, fit share) gives the
 bytes per point; K and the network size show the O(K) part. Writes the ``memory``
 section of BENCHMARKS.md.
 """
@@ -29,15 +29,19 @@ import json, resource, sys, time
 import numpy as np
 import asrbf_mesh as am
 
-def rss():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # MiB (Linux: KiB)
+def rss():  # peak resident set so far, MiB (Linux: ru_maxrss in KiB)
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+def now():  # resident set now, MiB
+    with open("/proc/self/status") as fh:
+        return next(int(l.split()[1]) for l in fh if l.startswith("VmRSS:")) / 1024
 
 n = int(sys.argv[1])
 # warm the compiled kernels on a small fit, so the big fit's peak is the fit's own
 rng = np.random.default_rng(1)
 xy = rng.random((2000, 2))
 am.fit(np.c_[xy, np.sin(3 * xy[:, 0])], seed=0, progress=False)
-base = rss()
+base = now()
 rng = np.random.default_rng(0)
 xy = rng.random((n, 2)) * [1000.0, 750.0]
 c = rng.random((12, 2)) * [1000.0, 750.0]
@@ -48,7 +52,7 @@ for i in range(12):
     z += a[i] * np.exp(-((xy - c[i]) ** 2).sum(1) / (2 * s[i] ** 2))
 pts = np.c_[xy, z + rng.normal(0, 0.05, n)]
 del xy, z
-data = rss()
+data = now()
 t0 = time.perf_counter()
 net = am.fit(pts, seed=0, progress=False)
 secs = time.perf_counter() - t0
@@ -85,8 +89,8 @@ def main() -> None:
         "## Memory of a fit (O(N + K))", "",
         "`python scripts/bench_memory.py` (" + machine() + "). Each size in a fresh process: "
         "a synthetic scan (12 Gaussian bumps over 1,000 × 750 mm, 0.05 mm noise), fitted with "
-        "the defaults, seed 0. Peak RSS (`ru_maxrss`) after the imports and a warm-up fit, "
-        "after the points are made, and after the fit.", "",
+        "the defaults, seed 0. Resident set (`VmRSS`) after the imports and a warm-up fit and "
+        "once the points exist; peak RSS (`ru_maxrss`) at the end.", "",
         table(["N", "K", "E̅", "fit s", "imports MiB", "points MiB", "fit MiB (peak − before)",
                "peak RSS MiB"], rows), "",
         f"The fit's memory grows linearly in N: {slope * 2**20:.0f} bytes per point "

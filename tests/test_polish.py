@@ -197,3 +197,33 @@ def test_fit_polish_modes(syn) -> None:
     assert nets["full"].info["ebar"] < nets["weights"].info["ebar"] < seq
     np.testing.assert_array_equal(nets["weights"].centers, nets["none"].centers)
     assert nets["weights"].info["polish_seconds"] >= 0
+
+
+def test_weight_polish_is_the_same_in_chunks(learned, monkeypatch) -> None:
+    # the normal equations summed over blocks of points equal the one-block sum
+    import asrbf_mesh.polish as P
+
+    hf, st = learned
+    args = (hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5)
+    whole = polish_weights(*args)
+    monkeypatch.setattr(P, "_CHUNK", 97)
+    chunked = polish_weights(*args)
+    np.testing.assert_allclose(chunked.weights, whole.weights, rtol=1e-9, atol=1e-12)
+    assert chunked.ebar_after == pytest.approx(whole.ebar_after, rel=1e-9)
+
+
+def test_large_systems_are_solved_by_conjugate_gradients() -> None:
+    # above _DIRECT_MAX unknowns: CG, same solution as the direct solve
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import spsolve
+
+    from asrbf_mesh.polish import _DIRECT_MAX, _solve_spd
+
+    side = int(np.sqrt(_DIRECT_MAX)) + 4  # a 2D neighbourhood structure, like A'A
+    lap = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(side, side))
+    eye = sp.eye(side)
+    mat = (sp.kron(lap, eye) + sp.kron(eye, lap) + 0.01 * sp.eye(side * side)).tocsr()
+    assert mat.shape[0] > _DIRECT_MAX
+    rhs = np.random.default_rng(0).standard_normal(mat.shape[0])
+    np.testing.assert_allclose(_solve_spd(mat, rhs), spsolve(mat.tocsc(), rhs),
+                               rtol=1e-7, atol=1e-9)
