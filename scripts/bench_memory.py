@@ -6,8 +6,8 @@ Each size runs in a fresh process: a synthetic range scan (a sum of Gaussian bum
 over 1,000 x 750 mm with 0.05 mm noise, points at random in (x, y)) is made, then fitted
 with the package defaults (seed 0). The process's peak RSS (``ru_maxrss``) is read
 at the end, and the resident set (``VmRSS``) after the imports and once the points exist;
-the fit's own share is the peak minus the resident set before the fit. A line fitted through (N, fit share) gives the
-bytes per point; K and the network size show the O(K) part. Writes the ``memory``
+the fit's own share is the peak minus the resident set before the fit. A line fitted
+through (N, fit share) gives the bytes per point; K shows the O(K) part. Writes the ``memory``
 section of BENCHMARKS.md.
 """
 
