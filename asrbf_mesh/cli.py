@@ -502,8 +502,9 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into head & co.
         return 0
     except MemoryError:
-        print("asrbf: error: out of memory (the input is too large for this machine; "
-              "a fit needs about 0.5 KB per point, see BENCHMARKS.md)", file=sys.stderr)
+        print("asrbf: error: out of memory (the input is too large for this machine; a fit "
+              "needs about 120 bytes per point, see 'Memory of a fit' in BENCHMARKS.md)",
+              file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("asrbf: interrupted", file=sys.stderr)
