@@ -366,9 +366,15 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
         points, source = np.asarray(scan, dtype=np.float64), None
         if points.ndim != 2 or points.shape[1] != 3:
             raise ScanError(f"points must have shape (N, 3), got {points.shape}")
+    named = f"{source}: " if source else ""
     if len(points) < MIN_POINTS:
-        raise ScanError(f"a fit needs at least {MIN_POINTS} points, got {len(points)}")
-    hf = to_height_field(points, view_axis=view_axis)  # type: ignore[arg-type]
+        raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points, got {len(points)}")
+    try:
+        hf = to_height_field(points, view_axis=view_axis)  # type: ignore[arg-type]
+    except ScanError as exc:
+        if not named or str(exc).startswith(named):
+            raise
+        raise ScanError(f"{named}{exc}") from None  # name the file, like load_scan
     t0 = time.perf_counter()
     learned = learn(hf, cfg, seed=seed, progress=progress)
     a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights

@@ -815,6 +815,10 @@ def test_library_collinear_in_the_chosen_frame() -> None:
     line = np.c_[np.cos(7 * t), t, 3 * t]  # view axis x: local (y, z) on a line
     with pytest.raises(ScanError, match="one line in \\(x, y\\) of the 'x' view frame"):
         am.fit(line, progress=False, passes=1, view_axis="x")
+    # a scan loaded from a file: the message names the file, as load_scan's do
+    scan = am.Scan(points=line, source="scans/line.ply")
+    with pytest.raises(ScanError, match="^scans/line.ply: .*one line in \\(x, y\\)"):
+        am.fit(scan, progress=False, passes=1, view_axis="x")
 
 
 def test_library_warnings_for_odd_scans() -> None:
