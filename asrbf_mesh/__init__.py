@@ -35,6 +35,7 @@ from .learn import NeuronCapWarning, fit, learn
 from .lod import LodLevel, lod_set, write_lod_set
 from .mesh import Mesh
 from .network import FitLog, Network, NeuronStats
+from .stream import fit_stream
 from .surface import reconstruct
 
 __all__ = [
@@ -63,6 +64,7 @@ __all__ = [
     "face_map_path",
     "fill_holes",
     "fit",
+    "fit_stream",
     "learn",
     "load_scan",
     "lod_set",

@@ -127,13 +127,19 @@ def _print_summary(s: dict[str, Any], out=None) -> None:
 
 def _cmd_fit(args: argparse.Namespace) -> int:
     cfg = _config(args)
-    scan = load_scan(args.scan)
     out = Path(args.output)
     if out.suffix.lower() != ".asrbf":
         raise AsrbfError(f"{out}: a network file must end in .asrbf")
     check_output_path(out, args.scan)  # before the fit, not after it
-    net = fit(scan, cfg, seed=args.seed, view_axis=args.view_axis,
-              progress=None if not args.json else False)
+    if args.stream:
+        from .stream import fit_stream
+
+        net = fit_stream(args.scan, cfg, seed=args.seed, view_axis=args.view_axis,
+                         chunk=args.chunk, mix=args.mix,
+                         progress=None if not args.json else False)
+    else:
+        net = fit(load_scan(args.scan), cfg, seed=args.seed, view_axis=args.view_axis,
+                  progress=None if not args.json else False)
     net.save(out, float32=args.float32, inputs=(args.scan,))
     summary = _fit_summary(net) | {"output": str(out)}
     if args.json:
@@ -367,6 +373,13 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("-o", "--output", required=True, help="output network file (.asrbf)")
     f.add_argument("--float32", action="store_true", help="store parameters in single precision")
     f.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    f.add_argument("--stream", action="store_true",
+                   help="read the scan in blocks instead of loading it: memory O(K + block) "
+                        "for scans larger than memory (NPY, binary PLY, XYZ)")
+    f.add_argument("--chunk", type=int, default=65_536,
+                   help="--stream: points per block, a multiple of 8192 [default: 65536]")
+    f.add_argument("--mix", type=int, default=16,
+                   help="--stream: blocks learned together in a random order [default: 16]")
     _add_learning(f)
     f.set_defaults(func=_cmd_fit)
 

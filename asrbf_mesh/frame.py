@@ -262,36 +262,58 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
         raise ScanError("points contain NaN or infinite coordinates")
     rot = _rotation(pts, view_axis)
     local = pts @ rot
-    lo = local.min(axis=0)
-    span = local.max(axis=0) - lo
-    tiny = 1e-12 * max(float(np.abs(local).max()), 1e-300)
+    frame = frame_from_bounds(rot, local.min(axis=0), local.max(axis=0),
+                              float(np.abs(local).max()), view_axis, local[:, :2])
+    xy, z = unit_height_field(frame, local)
+    spacing = sampling_spacing(xy)
+    check_height_field(local, pts, view_axis, warn_fraction, stacklevel=2)
+    return HeightField(xy, z, frame, spacing)
+
+
+def frame_from_bounds(rot: np.ndarray, lo: np.ndarray, hi: np.ndarray, absmax: float,
+                      view_axis: str, xy: np.ndarray | None = None) -> Frame:
+    """Return the unit-cube frame of points whose view-frame coordinates span ``[lo, hi]``.
+
+    Raises :class:`ScanError` for a zero x or y extent and, given the points' local
+    ``xy`` (or a sample of them), for points all on one line; a zero depth extent
+    (a flat scan) is valid and maps every depth to 0.
+    """
+    span = np.asarray(hi, dtype=np.float64) - lo
+    tiny = 1e-12 * max(absmax, 1e-300)
     for axis, name in ((0, "x"), (1, "y")):
         if span[axis] <= tiny:
             raise ScanError(
                 f"zero {name} extent in the {view_axis!r} view frame: a height field needs "
                 "an x and a y extent (try another --view-axis)")
-    if _collinear_xy(local[:, :2]):
+    if xy is not None and _collinear_xy(xy):
         raise ScanError(
             f"all points lie on one line in (x, y) of the {view_axis!r} view frame: a height "
             "field needs points spread over an area (try another --view-axis)")
     if span[2] <= tiny:
         span[2] = 1.0  # flat scan: valid, depth maps to 0
-    frame = Frame(rot, lo, span, view_axis)
-    unit = (local - lo) / span
-    xy = np.ascontiguousarray(np.clip(unit[:, :2], 0.0, 1.0))
-    z = np.ascontiguousarray(np.clip(unit[:, 2], 0.0, 1.0))
-    spacing = sampling_spacing(xy)
+    return Frame(rot, lo, span, view_axis)
+
+
+def unit_height_field(frame: Frame, local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """View-frame points (N, 3) to the unit square inputs (N, 2) and unit depths (N,)."""
+    unit = (local - frame.offset) / frame.scale
+    return (np.ascontiguousarray(np.clip(unit[:, :2], 0.0, 1.0)),
+            np.ascontiguousarray(np.clip(unit[:, 2], 0.0, 1.0)))
+
+
+def check_height_field(local: np.ndarray, pts: np.ndarray, view_axis: str,
+                       warn_fraction: float = 0.05, stacklevel: int = 2) -> None:
+    """Warn when the points (or a sample) fold over along the view axis or repeat."""
     bad = fold_fraction(local)
     if bad > warn_fraction:
         warnings.warn(
             f"{100 * bad:.0f}% of the points lie where the surface folds over itself along the "
             f"{view_axis!r} axis (several depths at one x, y): the data is not a height field "
             "in this frame; try --view-axis pca or another axis",
-            HeightFieldWarning, stacklevel=2)
+            HeightFieldWarning, stacklevel=stacklevel + 1)
     dup = duplicate_fraction(pts)
     if dup > warn_fraction:
         warnings.warn(
             f"{100 * dup:.0f}% of the points are exact copies of other points: each copy "
             "counts again in the fit and in E-bar (remove duplicates to weigh every sample "
-            "once)", DuplicatePointsWarning, stacklevel=2)
-    return HeightField(xy, z, frame, spacing)
+            "once)", DuplicatePointsWarning, stacklevel=stacklevel + 1)

@@ -27,7 +27,7 @@ import math
 import sys
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -41,7 +41,7 @@ from .frame import HeightField, to_height_field
 from .io import Scan
 from .network import FitLog, Network
 
-__all__ = ["fit", "learn", "auto_d_min", "residuals", "MIN_POINTS", "LearnedState",
+__all__ = ["fit", "learn", "learn_from", "auto_d_min", "residuals", "MIN_POINTS", "LearnedState",
            "NeuronCapWarning"]
 
 
@@ -233,7 +233,8 @@ def _progress(total: int, enabled: bool | None) -> Callable[[int], None] | None:
 
 
 def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
-          progress: bool | None = None) -> LearnedState:
+          progress: bool | None = None,
+          order: Callable[[np.random.Generator], np.ndarray] | None = None) -> LearnedState:
     """Run adaptive sequential learning (Algorithm 1) on a height field.
 
     Parameters
@@ -248,6 +249,11 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     progress : bool, optional
         Progress bar on stderr (default: when stderr is a terminal and the fit
         takes more than a second).
+    order : callable, optional
+        ``order(rng)`` returns the replay order of one pass (a permutation of the N
+        points), drawn from the seeded generator; default ``rng.permutation(N)``.
+        The streaming fit's block order (:func:`asrbf_mesh.stream.block_order`)
+        given here reproduces a streaming fit in memory.
 
     Returns
     -------
@@ -268,19 +274,52 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     if n < MIN_POINTS:
         raise ScanError(f"a fit needs at least {MIN_POINTS} points, got {n}")
     d_min = cfg.d_min if cfg.d_min is not None else auto_d_min(hf.spacing, cfg.error_threshold)
+    X = np.ascontiguousarray(hf.xy, dtype=np.float64)
+    Z = np.ascontiguousarray(hf.z, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+
+    def passes() -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        for _ in range(cfg.passes):
+            perm = rng.permutation(n) if order is None else order(rng)
+            yield X, Z, np.asarray(perm, dtype=np.int64)
+
+    return learn_from(passes(), n, cfg, d_min, progress=progress)
+
+
+def learn_from(batches: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int,
+               config: FitConfig, d_min: float, *,
+               progress: bool | None = None) -> LearnedState:
+    """Run sequential learning on observations fed in batches (the core of :func:`learn`).
+
+    Parameters
+    ----------
+    batches : iterable of (X, Z, order)
+        Unit-square inputs (M, 2), unit depths (M,) and the indices of the points to
+        learn from, in that order; ``n * config.passes`` indices over all batches.
+        :func:`learn` feeds the whole height field once per pass; the streaming fit
+        (:mod:`asrbf_mesh.stream`) feeds blocks read from disk.
+    n : int
+        Points in the scan (sizes the window of the growth criteria and the log).
+    config : FitConfig
+    d_min : float
+        The neuron separation floor D_min, unit square.
+    progress : bool, optional
+        Progress bar on stderr.
+
+    Returns
+    -------
+    LearnedState
+    """
+    cfg = config
     d_min = min(d_min, cfg.d_max)
     total = n * cfg.passes
     window = cfg.window
     prune_window = cfg.prune_window or cfg.window
     state = _State(cfg, d_min, n, total, window, prune_window)
-    X = np.ascontiguousarray(hf.xy, dtype=np.float64)
-    Z = np.ascontiguousarray(hf.z, dtype=np.float64)
-    rng = np.random.default_rng(seed)
     tick = _progress(total, progress)
     t0 = time.perf_counter()
-    for _ in range(cfg.passes):
-        order = rng.permutation(n).astype(np.int64)
-        for start in range(0, n, _CHUNK):
+    for X, Z, order in batches:
+        for start in range(0, len(order), _CHUNK):
             chunk = order[start:start + _CHUNK]
             state.run(X, Z, chunk, int(state.st[_lk.ST_T]) + len(chunk))
             if tick:
@@ -316,7 +355,9 @@ def residuals(net: Network, hf: HeightField) -> np.ndarray:
 
 
 def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int = 0,
-        view_axis: str = "z", progress: bool | None = None, **overrides: Any) -> Network:
+        view_axis: str = "z", progress: bool | None = None,
+        order: Callable[[np.random.Generator], np.ndarray] | None = None,
+        **overrides: Any) -> Network:
     """Fit an ASRBF network to a range scan: learning, then the optional polish.
 
     Parameters
@@ -331,6 +372,9 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
         Depth direction of the height field.
     progress : bool, optional
         Progress bar on stderr (default: on a terminal, for fits over a second).
+    order : callable, optional
+        The replay order of each pass, see :func:`learn` (default: a uniform random
+        permutation per pass).
     **overrides
         FitConfig fields to change, e.g. ``passes=3``.
 
@@ -376,7 +420,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
             raise
         raise ScanError(f"{named}{exc}") from None  # name the file, like load_scan
     t0 = time.perf_counter()
-    learned = learn(hf, cfg, seed=seed, progress=progress)
+    learned = learn(hf, cfg, seed=seed, progress=progress, order=order)
     a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
     tp = time.perf_counter()
     if cfg.polish == "weights":

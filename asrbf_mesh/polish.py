@@ -16,6 +16,7 @@ and over holes -- where learning left them instead of letting them explode.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,8 @@ from scipy.sparse.linalg import cg, spsolve
 from . import _network_kernels as _nk
 from .network import eval_grid, eval_unit
 
-__all__ = ["PolishResult", "polish_weights", "polish_full", "design_matrix"]
+__all__ = ["PolishResult", "polish_weights", "polish_weights_blocks", "polish_full",
+           "design_matrix"]
 
 _SIGMA_RANGE = (1e-5, 2.0)
 _CENTRE_BOX = (-0.25, 1.25)
@@ -101,20 +103,45 @@ def polish_weights(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray
     -------
     PolishResult
     """
+    return polish_weights_blocks(lambda: ((xy[sl], z[sl]) for sl in _chunks(len(z))), len(z),
+                                 a0, centers, widths, weights, support, ridge)
+
+
+def polish_weights_blocks(blocks: Callable[[], Iterable[tuple[np.ndarray, np.ndarray]]],
+                          n: int, a0: float, centers: np.ndarray, widths: np.ndarray,
+                          weights: np.ndarray, support: float,
+                          ridge: float = 1e-4) -> PolishResult:
+    """:func:`polish_weights` over points fed in blocks, in two passes over them.
+
+    Parameters
+    ----------
+    blocks : callable
+        ``blocks()`` returns a fresh iterable of ``(xy, z)`` blocks (unit square, unit
+        depth) covering the ``n`` points in one fixed order; it is called twice (the
+        normal equations, then the error after the solve). Blocks are cut further into
+        :data:`_CHUNK` rows; blocks whose sizes are multiples of it sum in the same
+        order as :func:`polish_weights` on the whole arrays, so the result is the same
+        bit for bit.
+    n : int
+        Number of points.
+    a0, centers, widths, weights, support, ridge
+        As :func:`polish_weights`.
+    """
     w0 = np.concatenate([[a0], weights])
     # the normal equations are summed over chunks of points: memory O(K + chunk), never
     # the whole (N, K) design matrix (16 bytes per point and neuron over it)
     ata = sp.csr_matrix((len(w0), len(w0)))
     atr = np.zeros(len(w0))
     before = 0.0
-    for sl in _chunks(len(z)):
-        A = design_matrix(xy[sl], centers, widths, weights, support)
-        r = z[sl] - A @ w0
-        before += float(np.abs(r).sum())
-        At = A.T.tocsr()
-        ata = ata + At @ A
-        atr += At @ r
-    before /= len(z)
+    for xy_b, z_b in blocks():
+        for sl in _chunks(len(z_b)):
+            A = design_matrix(xy_b[sl], centers, widths, weights, support)
+            r = z_b[sl] - A @ w0
+            before += float(np.abs(r).sum())
+            At = A.T.tocsr()
+            ata = ata + At @ A
+            atr += At @ r
+    before /= n
     diag = ata.diagonal()
     lam = max(ridge, _RIDGE_FLOOR) * float(diag.mean())
     # solve for the change: (A'A + lam) dw = A'(z - A w0)
@@ -122,8 +149,12 @@ def polish_weights(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray
     w = w0 + dw
     if not np.all(np.isfinite(w)):
         return PolishResult(a0, centers, widths, weights, before, before, 0)
-    after = sum(float(np.abs(design_matrix(xy[sl], centers, widths, weights, support) @ w
-                             - z[sl]).sum()) for sl in _chunks(len(z))) / len(z)
+    after = 0.0
+    for xy_b, z_b in blocks():
+        for sl in _chunks(len(z_b)):
+            A = design_matrix(xy_b[sl], centers, widths, weights, support)
+            after += float(np.abs(A @ w - z_b[sl]).sum())
+    after /= n
     if after > before:
         return PolishResult(a0, centers, widths, weights, before, before, 0)
     return PolishResult(float(w[0]), centers, widths, w[1:].copy(), before, after, 1)
