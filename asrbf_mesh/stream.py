@@ -100,19 +100,29 @@ class PointBlocks:
 
 
 class _ArrayBlocks(PointBlocks):
-    """Blocks of a memory-mapped array: NPY, or a binary PLY's vertex element."""
+    """Blocks of fixed-size binary records (NPY rows, binary PLY vertices).
 
-    def __init__(self, path: str, columns: list[np.ndarray] | np.ndarray, n: int,
-                 chunk: int) -> None:
+    Each block is read with one seek and one read into a fresh array, not through a
+    memory map: the pages of a map that has been read count in the resident set until
+    the kernel drops them, which is no bound at all.
+    """
+
+    def __init__(self, path: str, offset: int, dtype: np.dtype, n: int, chunk: int,
+                 fields: tuple[str, ...] | None = None) -> None:
         super().__init__(path, n, chunk)
-        self._columns = columns
+        self._offset, self._dtype, self._fields = offset, dtype, fields
 
     def block(self, b: int) -> np.ndarray:
         lo, hi = self.bounds(b)
-        if isinstance(self._columns, np.ndarray):
-            return np.array(self._columns[lo:hi, :3], dtype=np.float64)
-        return np.column_stack([np.asarray(c[lo:hi], dtype=np.float64)
-                                for c in self._columns])
+        with open(self.path, "rb") as fh:
+            fh.seek(self._offset + lo * self._dtype.itemsize)
+            rec = np.fromfile(fh, dtype=self._dtype, count=hi - lo)
+        if len(rec) != hi - lo:
+            raise ScanError(f"{self.path}: truncated: block {b} holds {len(rec):,} of "
+                            f"{hi - lo:,} points")
+        if self._fields is None:
+            return np.array(rec["v"][:, :3], dtype=np.float64)
+        return np.column_stack([rec[f].astype(np.float64) for f in self._fields])
 
 
 class _TextBlocks(PointBlocks):
@@ -155,7 +165,8 @@ def _ply_blocks(path: str, name: str, chunk: int) -> PointBlocks:
     if ply.text or not isinstance(vertex.data, np.memmap):
         raise ScanError(f"{name}: an ASCII PLY (or one with lists before its vertices) "
                         "cannot be streamed: convert it to binary PLY or NPY")
-    return _ArrayBlocks(name, [vertex.data[c] for c in "xyz"], len(vertex.data), chunk)
+    data = vertex.data
+    return _ArrayBlocks(name, int(data.offset), data.dtype, len(data), chunk, ("x", "y", "z"))
 
 
 def _text_blocks(path: str, name: str, chunk: int) -> PointBlocks:
@@ -210,13 +221,20 @@ def open_points(path: str | os.PathLike[str], chunk: int = DEFAULT_CHUNK) -> Poi
     if ext != ".npy":
         return _text_blocks(str(p), name, chunk)
     try:
-        arr = np.load(p, mmap_mode="r", allow_pickle=False)
+        with open(p, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0)
+            shape, fortran, dtype = read(fh)
+            offset = fh.tell()
     except Exception as exc:
         raise ScanError(f"{name}: cannot read NPY: {str(exc).splitlines()[0]}") from None
-    if arr.ndim != 2 or arr.shape[1] < 3 or arr.dtype.kind not in "fiu":
+    if len(shape) != 2 or shape[1] < 3 or dtype.kind not in "fiu" or fortran:
         raise ScanError(f"{name}: cannot read NPY: expected an (N, 3) or (N, >=3) real "
-                        f"array, got shape {arr.shape} of {arr.dtype}")
-    return _ArrayBlocks(name, arr, len(arr), chunk)
+                        f"array in C order, got shape {shape} of {dtype}"
+                        f"{' (Fortran order)' if fortran else ''}")
+    row = np.dtype([("v", dtype, (shape[1],))])
+    return _ArrayBlocks(name, offset, row, shape[0], chunk)
 
 
 # --------------------------------------------------------------------------- order

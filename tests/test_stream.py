@@ -179,3 +179,11 @@ def test_cli_fit_stream(files: dict[str, Path], streamed: am.Network, tmp_path: 
                          capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and "multiple of 8,192" in bad.stderr
     assert not (tmp_path / "b.asrbf").exists()
+
+
+def test_truncated_npy_is_reported(points: np.ndarray, tmp_path: Path) -> None:
+    path = tmp_path / "cut.npy"
+    np.save(path, points)
+    path.write_bytes(path.read_bytes()[:-1000])
+    with pytest.raises(ScanError, match=r"cut.npy: truncated: block 3 holds"):
+        fit_stream(path, chunk=CHUNK, progress=False)
