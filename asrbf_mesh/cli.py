@@ -130,6 +130,12 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix.lower() != ".asrbf":
         raise AsrbfError(f"{out}: a network file must end in .asrbf")
+    if args.stream:
+        from .stream import open_points
+
+        open_points(args.scan, args.chunk)  # the input's errors first
+    else:
+        scan = load_scan(args.scan)
     check_output_path(out, args.scan)  # before the fit, not after it
     if args.stream:
         from .stream import fit_stream
@@ -138,7 +144,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
                          chunk=args.chunk, mix=args.mix,
                          progress=None if not args.json else False)
     else:
-        net = fit(load_scan(args.scan), cfg, seed=args.seed, view_axis=args.view_axis,
+        net = fit(scan, cfg, seed=args.seed, view_axis=args.view_axis,
                   progress=None if not args.json else False)
     net.save(out, float32=args.float32, inputs=(args.scan,))
     summary = _fit_summary(net) | {"output": str(out)}
