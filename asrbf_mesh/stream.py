@@ -32,6 +32,7 @@ import io
 import math
 import os
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -70,7 +71,7 @@ STREAM_FORMATS = (".npy", ".ply", ".xyz", ".pts", ".txt")
 # --------------------------------------------------------------------------- sources
 
 
-class PointBlocks:
+class PointBlocks(ABC):
     """Random access, by block, to the (N, 3) points of a file.
 
     Attributes
@@ -90,9 +91,9 @@ class PointBlocks:
         """Number of blocks."""
         return -(-self.n // self.chunk)
 
+    @abstractmethod
     def block(self, b: int) -> np.ndarray:
         """Points of block ``b``, (m, 3) float64."""
-        raise NotImplementedError
 
     def bounds(self, b: int) -> tuple[int, int]:
         """First and one-past-last point index of block ``b``."""
