@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import signal
 import sys
 import threading
@@ -19,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from ._atomic import check_output_dir, check_output_path
+from ._atomic import atomic_path, check_output_dir, check_output_path
 from .config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
 from .errors import AsrbfError
 from .frame import VIEW_AXES
@@ -367,6 +368,30 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from . import batch
+
+    out = check_output_dir(args.output)
+    jobs = batch.plan_jobs(batch.expand_inputs(args.inputs), out, args.task,
+                           batch.parse_seeds(args.seeds), shlex.split(args.task_options))
+    res = batch.run_batch(jobs, workers=args.workers, scheduler=args.scheduler,
+                          skip_existing=args.skip_existing,
+                          tasks_per_worker=args.tasks_per_worker,
+                          progress=True if args.progress else None if not args.json else False)
+    summary = res.to_dict()
+    table = batch.summary_table(res)
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out / "summary.json") as tmp:
+        tmp.write_text(json.dumps(summary, indent=1, default=str))
+    with atomic_path(out / "summary.md") as tmp:
+        tmp.write_text(f"# asrbf batch --task {args.task}\n\n{table}\n")
+    if args.json:
+        print(json.dumps(summary, default=str))
+    else:
+        print(table)
+    return 1 if res.failed else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser of the ``asrbf`` command."""
     p = argparse.ArgumentParser(
@@ -482,6 +507,29 @@ def build_parser() -> argparse.ArgumentParser:
     fs.add_argument("-o", "--output", required=True, help="where the current mesh is saved")
     fs.add_argument("--json", action="store_true", help="print the run as JSON")
     fs.set_defaults(func=_cmd_filter_script)
+
+    b = sub.add_parser("batch", help="run fit / fill-holes / lod / compare over many scans "
+                                     "on dask.distributed")
+    b.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="scan files, folders of scans or glob patterns")
+    b.add_argument("-o", "--output", required=True, help="output folder (one folder per job)")
+    b.add_argument("--task", choices=("fit", "fill-holes", "lod", "compare"), default="fit")
+    b.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
+                   help="worker processes of the local cluster, one thread each "
+                        "[default: min(2, cores)]")
+    b.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="use a running dask scheduler instead of a local cluster")
+    b.add_argument("--seeds", default="0",
+                   help="seeds to run every file with: 0, 0,3,5 or 0-7 [default: 0]")
+    b.add_argument("--skip-existing", action="store_true",
+                   help="skip jobs whose record.json says ok and whose outputs exist")
+    b.add_argument("--tasks-per-worker", type=int, default=50,
+                   help="restart a worker after this many tasks [default: 50]")
+    b.add_argument("--progress", action="store_true", help="progress bar even off a terminal")
+    b.add_argument("--json", action="store_true", help="print the summary as JSON")
+    b.add_argument("--task-options", default="", metavar="'OPTIONS'",
+                   help="options for every task, quoted, e.g. '--levels 3 --compare-qem'")
+    b.set_defaults(func=_cmd_batch)
 
     d = sub.add_parser("demo", help="fit the face range map shipped with pymeshlab")
     d.add_argument("-o", "--output", default="asrbf-demo", help="output folder [asrbf-demo]")
