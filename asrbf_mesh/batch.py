@@ -283,8 +283,8 @@ def run_batch(jobs: Sequence[Job], *, workers: int = 2, scheduler: str | None = 
             or tasks_per_worker < 1:
         raise ConfigError(f"tasks_per_worker must be an integer >= 1, got {tasks_per_worker!r}")
     t0 = time.perf_counter()
-    for job in jobs:
-        check_output_dir(Path(job.out_dir).parent)
+    for parent in sorted({Path(j.out_dir).parent for j in jobs}):
+        check_output_dir(parent)
     records: list[dict[str, Any] | None] = [_done(j) if skip_existing else None for j in jobs]
     todo = [i for i, r in enumerate(records) if r is None]
     bar = None
@@ -298,43 +298,8 @@ def run_batch(jobs: Sequence[Job], *, workers: int = 2, scheduler: str | None = 
     if client is None and todo:
         client, closers = _cluster(workers, scheduler)
     try:
-        n_workers = max(1, len(client.scheduler_info()["workers"])) if todo else workers
-        from distributed import as_completed
-
-        runs: dict[str, int] = {}
-        pending = iter(todo)
-        futures = {}
-        for i in pending:
-            futures[client.submit(run_job, jobs[i], pure=False)] = i
-            if len(futures) >= n_workers:
-                break
-        queue = as_completed(list(futures))
-        for fut in queue:
-            i = futures.pop(fut)
-            try:
-                rec = fut.result()
-            except Exception as exc:  # the worker died: record it, go on
-                rec = {"input": jobs[i].path, "task": jobs[i].task, "seed": jobs[i].seed,
-                       "out_dir": jobs[i].out_dir, "status": "error", "outputs": [],
-                       "error": f"worker lost: {type(exc).__name__}: "
-                                f"{str(exc).splitlines()[0] if str(exc) else ''}",
-                       "result": None, "seconds": None, "worker": None}
-            records[i] = rec
-            if bar is not None:
-                bar.update(1)
-            addr = rec.get("worker")
-            nxt = next(pending, None)
-            if addr is not None:
-                runs[addr] = runs.get(addr, 0) + 1
-                if runs[addr] >= tasks_per_worker and nxt is not None:
-                    with contextlib.suppress(Exception):  # a worker without a nanny stays
-                        client.restart_workers([addr], timeout=60)
-                        restarts += 1
-                    runs.pop(addr, None)
-            if nxt is not None:
-                f = client.submit(run_job, jobs[nxt], pure=False)
-                futures[f] = nxt
-                queue.add(f)
+        if todo:
+            restarts = _run(client, jobs, todo, records, tasks_per_worker, bar)
     finally:
         if bar is not None:
             bar.close()
@@ -343,6 +308,50 @@ def run_batch(jobs: Sequence[Job], *, workers: int = 2, scheduler: str | None = 
                 c.close()
     return BatchResult([r for r in records if r is not None], restarts,
                        time.perf_counter() - t0, workers if scheduler is None else 0)
+
+
+def _run(client: Any, jobs: Sequence[Job], todo: list[int],
+         records: list[dict[str, Any] | None], tasks_per_worker: int, bar: Any) -> int:
+    """Run the jobs ``todo`` with one task in flight per worker; return the restarts."""
+    from distributed import as_completed
+
+    n_workers = max(1, len(client.scheduler_info()["workers"]))
+    restarts = 0
+    runs: dict[str, int] = {}
+    pending = iter(todo)
+    futures = {}
+    for i in pending:
+        futures[client.submit(run_job, jobs[i], pure=False)] = i
+        if len(futures) >= n_workers:
+            break
+    queue = as_completed(list(futures))
+    for fut in queue:
+        i = futures.pop(fut)
+        try:
+            rec = fut.result()
+        except Exception as exc:  # the worker died: record it, go on
+            rec = {"input": jobs[i].path, "task": jobs[i].task, "seed": jobs[i].seed,
+                   "out_dir": jobs[i].out_dir, "status": "error", "outputs": [],
+                   "error": f"worker lost: {type(exc).__name__}: "
+                            f"{str(exc).splitlines()[0] if str(exc) else ''}",
+                   "result": None, "seconds": None, "worker": None}
+        records[i] = rec
+        if bar is not None:
+            bar.update(1)
+        addr = rec.get("worker")
+        nxt = next(pending, None)
+        if addr is not None:
+            runs[addr] = runs.get(addr, 0) + 1
+            if runs[addr] >= tasks_per_worker and nxt is not None:
+                with contextlib.suppress(Exception):  # a worker without a nanny stays
+                    client.restart_workers([addr], timeout=60)
+                    restarts += 1
+                runs.pop(addr, None)
+        if nxt is not None:
+            f = client.submit(run_job, jobs[nxt], pure=False)
+            futures[f] = nxt
+            queue.add(f)
+    return restarts
 
 
 # --------------------------------------------------------------------------- summary
