@@ -16,7 +16,7 @@ import importlib.util
 import os
 import re
 import warnings
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -703,6 +703,37 @@ _READERS: dict[str, Callable[[Path], _Parsed]] = {
 # --------------------------------------------------------------------------- load_scan
 
 
+def check_scan_path(path: str | os.PathLike[str], formats: Sequence[str],
+                    unknown: str) -> tuple[Path, str]:
+    """Check that ``path`` is a non-empty file with one of ``formats``; return it and its name.
+
+    ``unknown`` words the format error, with ``{shown}`` standing for the extension.
+
+    Raises
+    ------
+    ScanError
+        One line starting with the path: missing, a directory, another format, empty or
+        unreadable.
+    """
+    p = Path(path)
+    name = os.fsdecode(path)
+    if not p.exists():
+        raise ScanError(f"{name}: no such file")
+    if p.is_dir():
+        raise ScanError(f"{name}: is a directory, not a scan file")
+    if p.suffix.lower() not in formats:
+        shown = f"'{p.suffix}'" if p.suffix else "(no extension)"
+        raise ScanError(f"{name}: {unknown.format(shown=shown)} "
+                        f"(expected one of {', '.join(formats)})")
+    try:
+        size = p.stat().st_size
+    except OSError as exc:
+        raise ScanError(f"{name}: cannot read ({exc.strerror})") from None
+    if size == 0:
+        raise ScanError(f"{name}: empty file (0 bytes)")
+    return p, name
+
+
 def load_scan(
     path: str | os.PathLike[str], *, min_points: int = 10, height_field: bool = True
 ) -> Scan:
@@ -762,26 +793,9 @@ def load_scan(
         raise ConfigError(f"min_points must be an integer, got {min_points!r}")
     if min_points < 1:
         raise ConfigError(f"min_points must be at least 1, got {min_points}")
-    p = Path(path)
-    name = os.fsdecode(path)
-    if not p.exists():
-        raise ScanError(f"{name}: no such file")
-    if p.is_dir():
-        raise ScanError(f"{name}: is a directory, not a scan file")
+    p, name = check_scan_path(path, SUPPORTED_SCAN_FORMATS, "unknown scan format {shown}")
     ext = p.suffix.lower()
-    reader = _READERS.get(ext)
-    if reader is None:
-        shown = f"'{p.suffix}'" if p.suffix else "(no extension)"
-        raise ScanError(
-            f"{name}: unknown scan format {shown} "
-            f"(expected one of {', '.join(SUPPORTED_SCAN_FORMATS)})"
-        )
-    try:
-        size = p.stat().st_size
-    except OSError as exc:
-        raise ScanError(f"{name}: cannot read ({exc.strerror})") from None
-    if size == 0:
-        raise ScanError(f"{name}: empty file (0 bytes)")
+    reader = _READERS[ext]
 
     fmt = _FORMAT_NAMES[ext]
     try:

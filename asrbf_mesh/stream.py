@@ -34,7 +34,6 @@ import os
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -50,6 +49,7 @@ from .frame import (
     sampling_spacing,
     unit_height_field,
 )
+from .io import check_scan_path
 from .learn import MIN_POINTS, auto_d_min, learn_from
 from .network import Network
 
@@ -204,19 +204,9 @@ def open_points(path: str | os.PathLike[str], chunk: int = DEFAULT_CHUNK) -> Poi
         Missing file, a directory, an empty file, another format, an ASCII PLY, an
         NPY that is not an (N, >=3) real array.
     """
-    p = Path(path)
-    name = os.fsdecode(path)
-    if not p.exists():
-        raise ScanError(f"{name}: no such file")
-    if p.is_dir():
-        raise ScanError(f"{name}: is a directory, not a scan file")
+    p, name = check_scan_path(path, STREAM_FORMATS,
+                              "format {shown} cannot be streamed (load it with load_scan)")
     ext = p.suffix.lower()
-    if ext not in STREAM_FORMATS:
-        shown = f"'{p.suffix}'" if p.suffix else "(no extension)"
-        raise ScanError(f"{name}: format {shown} cannot be streamed (expected one of "
-                        f"{', '.join(STREAM_FORMATS)}; load it with load_scan instead)")
-    if p.stat().st_size == 0:
-        raise ScanError(f"{name}: empty file (0 bytes)")
     if ext == ".ply":
         return _ply_blocks(str(p), name, chunk)
     if ext != ".npy":
