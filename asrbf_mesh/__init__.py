@@ -23,24 +23,22 @@ if "NUMBA_THREADING_LAYER" not in _os.environ:
 
     _numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
-from . import evaluate
+from ._config import FitConfig
+from ._footprint import Footprint
+from ._frame import DuplicatePointsWarning, Frame, HeightField, HeightFieldWarning, to_height_field
+from ._holes import FillResult, HoleInfo, fill_holes, punch_holes
+from ._io import Scan, face_map_path, load_scan, save_mesh
+from ._learn import NeuronCapWarning, fit, learn
+from ._lod import LodLevel, lod_set
+from ._mesh import Mesh
+from ._network import FitLog, Network, NeuronStats
+from ._stream import fit_stream
+from ._surface import reconstruct
 from ._version import __version__
-from .config import FitConfig
 from .errors import AsrbfError, ConfigError, FitError, NetworkFileError, ScanError
-from .footprint import Footprint
-from .frame import DuplicatePointsWarning, Frame, HeightField, HeightFieldWarning, to_height_field
-from .holes import FillResult, HoleInfo, fill_holes, punch_holes
-from .io import Scan, face_map_path, load_scan, save_mesh
-from .learn import NeuronCapWarning, fit, learn
-from .lod import LodLevel, lod_set, write_lod_set
-from .mesh import Mesh
-from .network import FitLog, Network, NeuronStats
-from .stream import fit_stream
-from .surface import reconstruct
 
 __all__ = [
     "__version__",
-    "evaluate",
     "AsrbfError",
     "ConfigError",
     "DuplicatePointsWarning",
@@ -72,5 +70,26 @@ __all__ = [
     "reconstruct",
     "save_mesh",
     "to_height_field",
-    "write_lod_set",
 ]
+
+_LAZY = {
+    # the evaluation side (pymeshlab, matplotlib) loads on first use only
+    "evaluate": ("asrbf_mesh.evaluate", None),
+}
+
+
+def __getattr__(name: str):
+    """Load the evaluation side on first use: ``import asrbf_mesh`` stays free of pymeshlab."""
+    if name in _LAZY:
+        import importlib
+
+        module, attr = _LAZY[name]
+        value = importlib.import_module(module)
+        value = value if attr is None else getattr(value, attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'asrbf_mesh' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Mesh
+from ._mesh import Mesh
 
 __all__ = ["point_mesh_distance", "boundary_loops"]
 

@@ -1,7 +1,7 @@
 """Compiled kernels of the adaptive sequential learning (private).
 
 Everything here runs in numba ``nopython`` mode with ``cache=True``. The public
-entry point is :func:`run_steps`; :mod:`asrbf_mesh.learn` owns the state arrays
+entry point is :func:`run_steps`; :mod:`asrbf_mesh._learn` owns the state arrays
 and calls it chunk by chunk (to show progress and to grow the arrays).
 
 Neurons live in *slots*. A pruned neuron frees its slot (``alive[s] = 0``) and
@@ -453,7 +453,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
               lev_off, lev_count, wbuf, Pg, log_t, log_k, log_rms, log_sig, log_amp, start):
     """Run Algorithm 1 on observations ``order[start:]`` until ``st[ST_T] == t_end``.
 
-    Parameters are the state arrays owned by ``asrbf_mesh.learn._State``. Returns
+    Parameters are the state arrays owned by ``asrbf_mesh._learn._State``. Returns
     ``(status, position)``: ``DONE`` when the chunk is consumed, ``NEED_SLOTS`` when a
     neuron must be added but every slot is used (grow ``W`` etc. and call again
     from ``position``), ``NEED_LOG`` when the log arrays are full.

@@ -21,15 +21,15 @@ import numpy as np
 
 from . import __version__
 from ._atomic import atomic_path, check_output_dir, check_output_path
-from .config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
+from ._config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
+from ._frame import VIEW_AXES
+from ._holes import BLENDS, fill_holes
+from ._io import face_map_path, load_scan, save_mesh
+from ._learn import fit
+from ._lod import lod_set
+from ._network import FORMAT_VERSION, Network
+from ._surface import FOOTPRINT_MODES, reconstruct
 from .errors import AsrbfError
-from .frame import VIEW_AXES
-from .holes import BLENDS, fill_holes
-from .io import face_map_path, load_scan, save_mesh
-from .learn import fit
-from .lod import lod_set, write_lod_set
-from .network import FORMAT_VERSION, Network
-from .surface import FOOTPRINT_MODES, reconstruct
 
 __all__ = ["main", "build_parser"]
 
@@ -132,14 +132,14 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".asrbf":
         raise AsrbfError(f"{out}: a network file must end in .asrbf")
     if args.stream:
-        from .stream import open_points
+        from ._stream import open_points
 
         open_points(args.scan, args.chunk)  # the input's errors first
     else:
         scan = load_scan(args.scan)
     check_output_path(out, args.scan)  # before the fit, not after it
     if args.stream:
-        from .stream import fit_stream
+        from ._stream import fit_stream
 
         net = fit_stream(args.scan, cfg, seed=args.seed, view_axis=args.view_axis,
                          chunk=args.chunk, mix=args.mix,
@@ -223,6 +223,8 @@ def _cmd_fill_holes(args: argparse.Namespace) -> int:
 
 
 def _cmd_lod(args: argparse.Namespace) -> int:
+    from .evaluate import write_lod_set
+
     scan = load_scan(args.scan)
     check_output_dir(args.output)
     levels = lod_set(scan, levels=args.levels, method=args.method, seed=args.seed)
@@ -246,7 +248,7 @@ def _cmd_lod(args: argparse.Namespace) -> int:
 
 
 def _cmd_metro(args: argparse.Namespace) -> int:
-    from .evaluate.metro import metro
+    from .evaluate._metro import metro
 
     a, b = load_scan(args.mesh), load_scan(args.reference)
     outs = [x for x in (args.error_mesh, args.samples_out) if x]
@@ -288,7 +290,7 @@ def _cmd_metro(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from .evaluate.report import compare, write_compare
+    from .evaluate._report import compare, write_compare
 
     scan = load_scan(args.scan)
     out = check_output_dir(args.output)
@@ -316,7 +318,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from .evaluate.report import load_compare, write_summary
+    from .evaluate._report import load_compare, write_summary
 
     results = [load_compare(p) for p in args.inputs]
     out = check_output_dir(args.output)
@@ -369,7 +371,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from . import batch
+    from . import _batch as batch
 
     out = check_output_dir(args.output)
     jobs = batch.plan_jobs(batch.expand_inputs(args.inputs), out, args.task,

@@ -10,14 +10,14 @@ from typing import Any
 import numpy as np
 import pymeshlab
 
+from asrbf_mesh._holes import FillResult, fill_holes
+from asrbf_mesh._io import Scan
+from asrbf_mesh._lod import lod_set
+from asrbf_mesh._mesh import Mesh
+from asrbf_mesh._network import Network
+from asrbf_mesh._surface import reconstruct
 from asrbf_mesh.errors import AsrbfError
-from asrbf_mesh.evaluate.metro import metro
-from asrbf_mesh.holes import FillResult, fill_holes
-from asrbf_mesh.io import Scan
-from asrbf_mesh.lod import lod_set
-from asrbf_mesh.mesh import Mesh
-from asrbf_mesh.network import Network
-from asrbf_mesh.surface import reconstruct
+from asrbf_mesh.evaluate._metro import metro
 
 from ._bridge import (
     NetworkCache,

@@ -40,9 +40,9 @@ import numpy as np
 import pymeshlab
 
 from asrbf_mesh._atomic import atomic_path, check_output_path
+from asrbf_mesh._io import SUPPORTED_SCAN_FORMATS, load_scan
+from asrbf_mesh._validate import jsonable as _jsonable
 from asrbf_mesh.errors import AsrbfError
-from asrbf_mesh.io import SUPPORTED_SCAN_FORMATS, load_scan
-from asrbf_mesh.lod import _jsonable
 
 from ._filters import apply_filter, filter_list
 from ._params import FILTERS, MeshlabFilterError

@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _bench_common import BUNNIES, BUNNY_DIR, machine, table, write_section  # noqa: E402
 
 import asrbf_mesh as am  # noqa: E402
-from asrbf_mesh.batch import parse_seeds  # noqa: E402
+from asrbf_mesh._batch import parse_seeds  # noqa: E402
 
 
 def asrbf_batch(inputs: list[str], out: Path, extra: list[str]) -> tuple[dict, float]:

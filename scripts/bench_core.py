@@ -23,7 +23,7 @@ from _bench_common import ROOT, machine, median_run, scans, table, timed, write_
 from scipy.interpolate import RBFInterpolator
 
 import asrbf_mesh as am
-from asrbf_mesh.polish import polish_weights
+from asrbf_mesh._polish import polish_weights
 
 warnings.simplefilter("ignore")
 SEEDS = (0, 1, 2)

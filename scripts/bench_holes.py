@@ -24,10 +24,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 from _bench_common import ROOT, machine, scans, table, write_section  # noqa: E402
 
 import asrbf_mesh as am  # noqa: E402
+from asrbf_mesh._holes import fill_holes  # noqa: E402
 from asrbf_mesh._igl import boundary_loops  # noqa: E402
-from asrbf_mesh.evaluate.holes_bench import hole_benchmark  # noqa: E402
-from asrbf_mesh.evaluate.plots import render_shaded  # noqa: E402
-from asrbf_mesh.holes import fill_holes  # noqa: E402
+from asrbf_mesh.evaluate._holes_bench import hole_benchmark  # noqa: E402
+from asrbf_mesh.evaluate._plots import render_shaded  # noqa: E402
 
 warnings.simplefilter("ignore")
 IMG = ROOT / "docs" / "img"

@@ -4,7 +4,7 @@
     python scripts/bench_lod.py --scans face     # one scan
     python scripts/bench_lod.py --no-grid-study  # skip the refit grid-spacing study
 
-For each scan, 4 levels by `resample` and by `refit` (asrbf_mesh.lod), and at each level's
+For each scan, 4 levels by `resample` and by `refit` (asrbf_mesh._lod), and at each level's
 face count the two QEM baselines (fast-simplification with preserve_border, pymeshlab's
 quadric edge collapse with preserveboundary). Errors are Metro-style against the scan mesh
 (pymeshlab Hausdorff filter, both directions, % of the scan's bounding-box diagonal).
@@ -24,8 +24,8 @@ import numpy as np
 from _bench_common import ROOT, machine, scans, table, write_section
 
 import asrbf_mesh as am
-from asrbf_mesh import _meshlab, _simplify
-from asrbf_mesh.lod import lod_set, ply_bytes, write_lod_set
+from asrbf_mesh._lod import lod_set, ply_bytes
+from asrbf_mesh.evaluate import _meshlab, _simplify, write_lod_set
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -221,7 +221,7 @@ def main() -> None:
     am.fit(S[next(iter(S))], seed=0, progress=False)  # JIT warm-up
     parts = [
         "### Levels of detail (issue 3): `resample`, `refit` and quadric decimation\n",
-        "Four levels per method (`asrbf_mesh.lod.lod_set`, seed 0; level 0 is the finest). "
+        "Four levels per method (`asrbf_mesh._lod.lod_set`, seed 0; level 0 is the finest). "
         "`resample`: the default network sampled at the scan's spacing × 2^i. `refit`: one "
         "fit per level with D_min = 0.01 × 2^i, meshed at a grid of D_min / 4 (not finer than "
         "the scan). Both mesh the scan's footprint (`reconstruct(..., mode=\"scan\")`). QEM: "

@@ -20,8 +20,8 @@ import numpy as np  # noqa: E402
 from _bench_common import scans, table  # noqa: E402
 
 import asrbf_mesh as am  # noqa: E402
-from asrbf_mesh.evaluate.metro import metro  # noqa: E402
-from asrbf_mesh.evaluate.som import _ball_pivoting, compare_som, som_grid, train_som  # noqa: E402
+from asrbf_mesh.evaluate._metro import metro  # noqa: E402
+from asrbf_mesh.evaluate._som import _ball_pivoting, compare_som, som_grid, train_som  # noqa: E402
 
 ap = argparse.ArgumentParser()
 ap.add_argument("names", nargs="*")

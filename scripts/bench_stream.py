@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 from _bench_common import machine, table, write_section  # noqa: E402
 
 import asrbf_mesh as am  # noqa: E402
-from asrbf_mesh.stream import open_points  # noqa: E402
+from asrbf_mesh._stream import open_points  # noqa: E402
 
 BLOCK = 1 << 20
 

@@ -57,8 +57,8 @@ def _seed_scans() -> dict[str, bytes]:
     """Small valid files of every supported format (first byte: the extension index)."""
     import numpy as np
 
-    from asrbf_mesh.io import save_mesh
-    from asrbf_mesh.mesh import Mesh
+    from asrbf_mesh._io import save_mesh
+    from asrbf_mesh._mesh import Mesh
 
     rng = np.random.default_rng(0)
     g = np.stack(np.meshgrid(np.arange(4.0), np.arange(3.0)), -1).reshape(-1, 2)
@@ -141,8 +141,8 @@ def check_scan(data: bytes) -> bool:
     """
     import numpy as np
 
+    from asrbf_mesh._io import load_scan
     from asrbf_mesh.errors import AsrbfError
-    from asrbf_mesh.io import load_scan
 
     if not data:
         return False
@@ -201,8 +201,8 @@ def check_network(data: bytes) -> bool:
     """
     import numpy as np
 
+    from asrbf_mesh._network import Network
     from asrbf_mesh.errors import AsrbfError
-    from asrbf_mesh.network import Network
 
     if not data:
         return False
@@ -243,7 +243,10 @@ def _instrument(atheris) -> None:
 
     import plyfile
 
-    from asrbf_mesh import config, frame, io, network
+    from asrbf_mesh import _config as config
+    from asrbf_mesh import _frame as frame
+    from asrbf_mesh import _io as io
+    from asrbf_mesh import _network as network
 
     for module in (io, network, frame, config, plyfile):
         for obj in list(vars(module).values()):

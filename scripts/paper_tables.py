@@ -383,7 +383,7 @@ def table_4(R: Runs) -> str:
     cols = ["source", "scan", "K", "Hausdorff %", "mean %", "RMS %", "SOM nodes", "SOM grid",
             "SOM Hausdorff %", "SOM mean %", "SOM RMS %"]
     paper_rows = [["paper", n, *v] for n, v in PAPER_T4.items()]
-    from asrbf_mesh.evaluate.som import compare_som
+    from asrbf_mesh.evaluate._som import compare_som
 
     rows, wins, dirs, secs, lines = [], [], [], [], []
     # the package's default pipeline (what `asrbf fit` and `asrbf compare` run) on every
@@ -424,7 +424,7 @@ def table_4(R: Runs) -> str:
     left = [n for n in full_scans(R) if n not in R.som_scans]
     return "\n".join([
         head,
-        "`asrbf_mesh.evaluate.som.compare_som` (seed 0): a SOM (MiniSom's algorithm, "
+        "`asrbf_mesh.evaluate._som.compare_som` (seed 0): a SOM (MiniSom's algorithm, "
         "compiled; 500 online steps per node, dead nodes dropped) with about as many nodes "
         "as our network has neurons, on "
         "the most square grid, and as many vertices sampled from our network over the scan's "

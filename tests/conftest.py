@@ -2,7 +2,7 @@
 
 Every synthetic scan is a height field ``z = f(x, y)`` sampled on a jittered grid
 and scaled to physical units (x in [100, 180] mm, y in [20, 80] mm, z in about
-[5, 30] mm), so that the unit-cube normalization of :mod:`asrbf_mesh.frame` is
+[5, 30] mm), so that the unit-cube normalization of :mod:`asrbf_mesh._frame` is
 exercised by every test.
 """
 

@@ -20,7 +20,7 @@ import asrbf_mesh as am
 
 CHILD = r"""
 import sys, time
-import asrbf_mesh.io as io
+import asrbf_mesh._io as io
 from asrbf_mesh.cli import main
 
 real = io._WRITERS[".ply"]

@@ -42,10 +42,10 @@ import plyfile
 import pytest
 
 import asrbf_mesh as am
+from asrbf_mesh._network import FORMAT_VERSION
 from asrbf_mesh.cli import main
 from asrbf_mesh.errors import AsrbfError, NetworkFileError, ScanError
-from asrbf_mesh.evaluate.report import load_compare
-from asrbf_mesh.network import FORMAT_VERSION
+from asrbf_mesh.evaluate._report import load_compare
 
 GRID = 16  # 256 points: every fit here takes milliseconds
 QUANTUM = 2.0**-10  # coordinates are multiples of this (see the module docstring)
@@ -836,7 +836,7 @@ def test_library_warnings_for_odd_scans() -> None:
 
 def test_duplicates_do_not_change_the_sampling_spacing() -> None:
     """Copies of every point (4 and more hide all distinct neighbours) are ignored."""
-    from asrbf_mesh.frame import sampling_spacing
+    from asrbf_mesh._frame import sampling_spacing
 
     xy = np.random.default_rng(0).random((300, 2))
     one = sampling_spacing(xy)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
-from asrbf_mesh.batch import (
+from asrbf_mesh._batch import (
     Job,
     expand_inputs,
     parse_seeds,

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
+from asrbf_mesh._network import FORMAT_VERSION
 from asrbf_mesh.cli import main
-from asrbf_mesh.network import FORMAT_VERSION
 
 FIT_KEYS = {"n_points", "n_neurons", "ebar", "n_to_k", "storage_ratio", "error_mean",
             "error_std", "steps", "fit_seconds", "us_per_step"}

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from asrbf_mesh.config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
+from asrbf_mesh._config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
 from asrbf_mesh.errors import AsrbfError, ConfigError
 
 

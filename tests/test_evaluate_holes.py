@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from test_holes import franke, grid_scan
 
-from asrbf_mesh.evaluate.holes_bench import HOLE_METHODS, hole_benchmark
+from asrbf_mesh.evaluate._holes_bench import HOLE_METHODS, hole_benchmark
 
 
 def test_hole_benchmark_rows_on_a_smooth_surface() -> None:

@@ -7,14 +7,14 @@ import warnings
 import numpy as np
 import pytest
 
-from asrbf_mesh.errors import ScanError
-from asrbf_mesh.frame import (
+from asrbf_mesh._frame import (
     VIEW_AXES,
     Frame,
     HeightFieldWarning,
     sampling_spacing,
     to_height_field,
 )
+from asrbf_mesh.errors import ScanError
 
 # world axis that carries the depth for each fixed view axis
 DEPTH_AXIS = {"z": 2, "x": 0, "y": 1}

@@ -60,7 +60,7 @@ def test_a_broken_contract_is_reported(monkeypatch) -> None:
 
     import numpy as np
 
-    import asrbf_mesh.io as aio
+    import asrbf_mesh._io as aio
 
     bad = SimpleNamespace(points=np.array([[np.nan, 0, 0], [1, 1, 1], [2, 0, 1]]), faces=None)
     monkeypatch.setattr(aio, "load_scan", lambda *a, **k: bad)

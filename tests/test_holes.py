@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
+from asrbf_mesh._holes import fill_holes, parse_size, punch_holes
 from asrbf_mesh._igl import boundary_loops, point_mesh_distance
+from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.cli import main
 from asrbf_mesh.errors import AsrbfError
-from asrbf_mesh.holes import fill_holes, parse_size, punch_holes
-from asrbf_mesh.surface import grid_faces
 
 
 def grid_scan(fn, nx=70, ny=50, size=(70.0, 50.0), seed=0) -> am.Scan:

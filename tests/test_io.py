@@ -1,4 +1,4 @@
-"""Tests of asrbf_mesh.io: Scan, load_scan, save_mesh, face_map_path.
+"""Tests of asrbf_mesh._io: Scan, load_scan, save_mesh, face_map_path.
 
 ``tests/data/bun000_crop.ply`` is a 60 x 50 crop (grid rows 30-89, cols 100-149) of
 the Stanford bunny range scan ``bun000.ply`` (Stanford 3D Scanning Repository,
@@ -18,9 +18,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from asrbf_mesh import io as scan_io
-from asrbf_mesh.errors import AsrbfError, ConfigError, ScanError
-from asrbf_mesh.io import (
+from asrbf_mesh import _io as scan_io
+from asrbf_mesh._io import (
     SUPPORTED_MESH_FORMATS,
     SUPPORTED_SCAN_FORMATS,
     Scan,
@@ -28,7 +27,8 @@ from asrbf_mesh.io import (
     load_scan,
     save_mesh,
 )
-from asrbf_mesh.mesh import Mesh
+from asrbf_mesh._mesh import Mesh
+from asrbf_mesh.errors import AsrbfError, ConfigError, ScanError
 
 DATA = Path(__file__).parent / "data"
 CROP = DATA / "bun000_crop.ply"

@@ -16,10 +16,10 @@ import pytest
 
 from asrbf_mesh import _learn_kernels as lk
 from asrbf_mesh import _network_kernels as nk
-from asrbf_mesh.config import FitConfig
-from asrbf_mesh.frame import Frame, to_height_field
-from asrbf_mesh.learn import _State
-from asrbf_mesh.network import Network
+from asrbf_mesh._config import FitConfig
+from asrbf_mesh._frame import Frame, to_height_field
+from asrbf_mesh._learn import _State
+from asrbf_mesh._network import Network
 
 BOX = (-0.25, 1.25)  # the centre box of learning
 

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
-from asrbf_mesh.config import FitConfig
+from asrbf_mesh._config import FitConfig
+from asrbf_mesh._frame import to_height_field
+from asrbf_mesh._learn import MIN_POINTS, LearnedState, auto_d_min, learn, residuals
 from asrbf_mesh.errors import ScanError
-from asrbf_mesh.frame import to_height_field
-from asrbf_mesh.learn import MIN_POINTS, LearnedState, auto_d_min, learn, residuals
 
 SEQ = {"polish": "none", "progress": False}  # the paper's method, no batch stage
 

@@ -10,17 +10,10 @@ import plyfile
 import pytest
 
 import asrbf_mesh as am
-from asrbf_mesh import _simplify
+from asrbf_mesh._lod import LodLevel, lod_set, network_file_bytes, ply_bytes
+from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.errors import AsrbfError, ConfigError
-from asrbf_mesh.lod import (
-    QEM_BASELINES,
-    LodLevel,
-    lod_set,
-    network_file_bytes,
-    ply_bytes,
-    write_lod_set,
-)
-from asrbf_mesh.surface import grid_faces
+from asrbf_mesh.evaluate import QEM_BASELINES, _simplify, write_lod_set
 
 NX, NY = 60, 50
 LEVEL_KEYS = {"index", "path", "method", "vertices", "faces", "bytes", "mean_pct", "rms_pct",

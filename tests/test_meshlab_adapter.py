@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
-from asrbf_mesh import _meshlab as ml
+from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.errors import AsrbfError
-from asrbf_mesh.surface import grid_faces
+from asrbf_mesh.evaluate import _meshlab as ml
 
 NX, NY = 60, 50  # samples along x (80 mm) and y (60 mm)
 

@@ -14,8 +14,8 @@ import pytest
 
 import asrbf_mesh as am
 import meshlab_filter as mf
+from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.errors import AsrbfError
-from asrbf_mesh.surface import grid_faces
 from meshlab_filter._bridge import NetworkCache, layer_scan
 
 NX, NY = 41, 31  # a 2 mm grid over x in [100, 180], y in [20, 80]

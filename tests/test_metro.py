@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
+from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.cli import main
 from asrbf_mesh.errors import AsrbfError
 from asrbf_mesh.evaluate import MetroResult, metro
-from asrbf_mesh.surface import grid_faces
 
 
 def sheet(n: int = 30, size: float = 10.0, z=lambda x, y: 0.02 * x * y) -> am.Mesh:

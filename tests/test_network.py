@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
-from asrbf_mesh.config import FitConfig
+from asrbf_mesh._config import FitConfig
+from asrbf_mesh._frame import Frame
+from asrbf_mesh._network import FORMAT_VERSION, VOLATILE_INFO, FitLog, Network
 from asrbf_mesh.errors import AsrbfError, NetworkFileError
-from asrbf_mesh.frame import Frame
-from asrbf_mesh.network import FORMAT_VERSION, VOLATILE_INFO, FitLog, Network
 
 
 def grid_xy(net: Network, n: int = 25, inset: float = 0.02) -> np.ndarray:

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
-from asrbf_mesh.config import FitConfig
-from asrbf_mesh.frame import to_height_field
-from asrbf_mesh.learn import learn
-from asrbf_mesh.polish import design_matrix, polish_full, polish_weights
+from asrbf_mesh._config import FitConfig
+from asrbf_mesh._frame import to_height_field
+from asrbf_mesh._learn import learn
+from asrbf_mesh._polish import design_matrix, polish_full, polish_weights
 
 
 @pytest.fixture(scope="module")
@@ -201,7 +201,7 @@ def test_fit_polish_modes(syn) -> None:
 
 def test_weight_polish_is_the_same_in_chunks(learned, monkeypatch) -> None:
     # the normal equations summed over blocks of points equal the one-block sum
-    import asrbf_mesh.polish as P
+    import asrbf_mesh._polish as P
 
     hf, st = learned
     args = (hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5)
@@ -217,7 +217,7 @@ def test_large_systems_are_solved_by_conjugate_gradients() -> None:
     import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 
-    from asrbf_mesh.polish import _DIRECT_MAX, _solve_spd
+    from asrbf_mesh._polish import _DIRECT_MAX, _solve_spd
 
     side = int(np.sqrt(_DIRECT_MAX)) + 4  # a 2D neighbourhood structure, like A'A
     lap = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(side, side))

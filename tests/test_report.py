@@ -17,7 +17,7 @@ from scipy.spatial import Delaunay
 import asrbf_mesh as am
 from asrbf_mesh.cli import main
 from asrbf_mesh.errors import AsrbfError
-from asrbf_mesh.evaluate.report import compare, load_compare, write_compare, write_summary
+from asrbf_mesh.evaluate._report import compare, load_compare, write_compare, write_summary
 
 METRO = ("hausdorff", "mean", "rms", "hausdorff_pct", "mean_pct", "rms_pct", "n_samples")
 SOM_STEPS = 3_000

@@ -8,8 +8,8 @@ from scipy.spatial import Delaunay
 
 import asrbf_mesh as am
 from asrbf_mesh.errors import AsrbfError, ScanError
-from asrbf_mesh.evaluate.metro import MetroResult
-from asrbf_mesh.evaluate.som import (
+from asrbf_mesh.evaluate._metro import MetroResult
+from asrbf_mesh.evaluate._som import (
     SomComparison,
     SomMap,
     _ball_pivoting,

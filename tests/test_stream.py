@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
-import asrbf_mesh.stream as stream
+import asrbf_mesh._stream as stream
+from asrbf_mesh._stream import block_order, fit_stream, open_points
 from asrbf_mesh.errors import ConfigError, ScanError
-from asrbf_mesh.stream import block_order, fit_stream, open_points
 
 N = 30_000
 CHUNK = 8_192

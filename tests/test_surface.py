@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
+from asrbf_mesh._footprint import Footprint
+from asrbf_mesh._surface import grid_faces, reconstruct
 from asrbf_mesh.errors import AsrbfError
-from asrbf_mesh.footprint import Footprint
-from asrbf_mesh.surface import grid_faces, reconstruct
 
 HOLE_CENTRE = np.array([140.0, 50.0])  # mm, inside the Franke scan
 HOLE_RADIUS = 15.0

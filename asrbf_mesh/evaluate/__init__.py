@@ -1,4 +1,7 @@
-"""Evaluation: Metro distances, the SOM baseline, comparisons and reports.
+"""Evaluation: Metro distances, the SOM baseline, hole and LOD benchmarks, reports.
+
+This side of the package holds everything that needs pymeshlab or matplotlib; the
+core (``import asrbf_mesh``) loads neither.
 
 >>> from asrbf_mesh.evaluate import metro       # doctest: +SKIP
 >>> metro(mesh, scan).rms_pct                   # doctest: +SKIP
@@ -6,8 +9,30 @@
 
 from __future__ import annotations
 
-from .metro import Direction, MetroResult, metro
-from .som import SomComparison, SomMap, compare_som, network_vertices, som_grid, train_som
+from ._holes_bench import HOLE_METHODS, HoleRow, hole_benchmark
+from ._lod_report import QEM_BASELINES, write_lod_set
+from ._metro import Direction, MetroResult, metro
+from ._report import Comparison, compare, load_compare, write_compare, write_summary
+from ._som import SomComparison, SomMap, compare_som, network_vertices, som_grid, train_som
 
-__all__ = ["Direction", "MetroResult", "SomComparison", "SomMap", "compare_som", "metro",
-           "network_vertices", "som_grid", "train_som"]
+__all__ = [
+    "HOLE_METHODS",
+    "QEM_BASELINES",
+    "Comparison",
+    "Direction",
+    "HoleRow",
+    "MetroResult",
+    "SomComparison",
+    "SomMap",
+    "compare",
+    "compare_som",
+    "hole_benchmark",
+    "load_compare",
+    "metro",
+    "network_vertices",
+    "som_grid",
+    "train_som",
+    "write_compare",
+    "write_lod_set",
+    "write_summary",
+]

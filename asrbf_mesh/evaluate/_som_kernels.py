@@ -3,7 +3,7 @@
 The algorithm is MiniSom's (rectangular grid, Gaussian neighbourhood, Euclidean
 winner, asymptotic decay of radius and rate, ``w += eta h (x - w)`` on every node), run
 in one compiled loop instead of one Python call per step: 40-60 times faster at the
-baseline's grid sizes (see :func:`asrbf_mesh.evaluate.som.train_som`), and equal to
+baseline's grid sizes (see :func:`asrbf_mesh.evaluate._som.train_som`), and equal to
 MiniSom's weights to round-off (``tests/test_som.py`` checks it against MiniSom).
 """
 

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._footprint import Footprint
+from ._frame import sampling_spacing
+from ._io import Scan
+from ._mesh import Mesh
+from ._network import Network
 from .errors import AsrbfError
-from .footprint import Footprint
-from .frame import sampling_spacing
-from .io import Scan
-from .mesh import Mesh
-from .network import Network
 
 __all__ = ["reconstruct", "grid_faces", "FOOTPRINT_MODES"]
 
@@ -82,8 +82,8 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     Examples
     --------
     >>> import numpy as np
-    >>> from asrbf_mesh.frame import Frame
-    >>> from asrbf_mesh.config import FitConfig
+    >>> from asrbf_mesh._frame import Frame
+    >>> from asrbf_mesh._config import FitConfig
     >>> net = Network(0.0, np.array([[0.5, 0.5]]), np.array([0.3]), np.array([1.0]),
     ...               Frame(np.eye(3), np.zeros(3), np.ones(3)), FitConfig())
     >>> m = reconstruct(net, resolution=11)

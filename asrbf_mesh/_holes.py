@@ -37,12 +37,12 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from . import _holes_kernels as _hk
+from ._footprint import Footprint, point_cloud_faces, signed_areas
+from ._frame import sampling_spacing
+from ._io import Scan
+from ._mesh import Mesh
+from ._network import Network
 from .errors import AsrbfError, ScanError
-from .footprint import Footprint, point_cloud_faces, signed_areas
-from .frame import sampling_spacing
-from .io import Scan
-from .mesh import Mesh
-from .network import Network
 
 __all__ = ["FillResult", "HoleInfo", "PunchedScan", "fill_holes", "find_holes", "parse_size",
            "punch_holes"]
@@ -801,7 +801,7 @@ def fill_holes(scan: Scan, net: Network | None = None, *,
     if lowpass_rel is not None and not (np.isfinite(lowpass_rel) and lowpass_rel > 0):
         raise AsrbfError(f"lowpass_rel must be a positive number or None, got {lowpass_rel!r}")
     if net is None:
-        from .learn import fit
+        from ._learn import fit
 
         net = fit(scan, seed=seed, progress=progress)
     R = net.frame.rotation

@@ -1,9 +1,9 @@
 """Ground-truth hole benchmark: punch disks, fill them by several methods, measure.
 
-Interior disks are removed from a scan (:func:`asrbf_mesh.holes.punch_holes`) and
+Interior disks are removed from a scan (:func:`asrbf_mesh._holes.punch_holes`) and
 their points kept as the truth; each method fills the holed scan, and the distance of
 every truth point to the filled surface is reported in % of the scan's bounding-box
-diagonal. Methods: ours (:func:`~asrbf_mesh.holes.fill_holes`, fit included), a
+diagonal. Methods: ours (:func:`~asrbf_mesh._holes.fill_holes`, fit included), a
 thin-plate-spline height field on our fill triangulation (scipy ``RBFInterpolator``,
 64 neighbours), MeshLab's Close Holes and screened Poisson (normals from the points).
 """
@@ -17,11 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
-from .. import _meshlab
+from .._holes import FillResult, PunchedScan, fill_holes, punch_holes
 from .._igl import point_mesh_distance
-from ..holes import FillResult, PunchedScan, fill_holes, punch_holes
-from ..io import Scan
-from ..mesh import Mesh
+from .._io import Scan
+from .._mesh import Mesh
+from . import _meshlab
 
 __all__ = ["HOLE_METHODS", "HoleRow", "hole_benchmark"]
 

@@ -26,10 +26,10 @@ import numpy as np
 
 from .._atomic import atomic_path
 from .._igl import point_mesh_distance
+from .._io import Scan, save_mesh
+from .._network import Network
 from ..errors import AsrbfError
-from ..io import Scan, save_mesh
-from ..network import Network
-from . import plots
+from . import _plots as plots
 
 __all__ = ["Comparison", "compare", "write_compare", "write_summary"]
 
@@ -81,7 +81,7 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
         Also build a 4-level LOD set (``resample``) with the QEM comparison, written to
         ``lod_dir``.
     som_iterations : int, optional
-        SOM training steps (default: :func:`~asrbf_mesh.evaluate.som.train_som`'s, 500 per
+        SOM training steps (default: :func:`~asrbf_mesh.evaluate._som.train_som`'s, 500 per
         node; fewer steps give a faster, coarser baseline).
     progress : bool, optional
         A progress bar over the steps (default: on a terminal).
@@ -97,8 +97,8 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
     """
     from tqdm.auto import tqdm
 
-    from ..learn import fit
-    from .som import _check_count, compare_som
+    from .._learn import fit
+    from ._som import _check_count, compare_som
 
     if scan.faces is None or len(scan.faces) == 0:
         raise AsrbfError(f"{scan.source or 'scan'}: compare needs a scan with faces (a range "
@@ -139,7 +139,7 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
             "seed": seed,
         }
         if holes:
-            from .holes_bench import hole_benchmark
+            from ._holes_bench import hole_benchmark
 
             bar.set_postfix_str("hole benchmark")
             t0 = time.perf_counter()
@@ -149,7 +149,8 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
             bar.update()
         levels = None
         if lod:
-            from ..lod import lod_set, write_lod_set
+            from .._lod import lod_set
+            from ._lod_report import write_lod_set
 
             bar.set_postfix_str("LOD set")
             t0 = time.perf_counter()

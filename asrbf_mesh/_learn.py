@@ -11,7 +11,7 @@ Each observation ``(x_n, z_n)`` of a random replay of the scan goes through:
 
 The loop runs in compiled code (:mod:`asrbf_mesh._learn_kernels`); this module owns
 the state, feeds it chunk by chunk, grows its arrays, shows progress and builds
-the :class:`~asrbf_mesh.network.Network`.
+the :class:`~asrbf_mesh._network.Network`.
 
 References
 ----------
@@ -34,12 +34,12 @@ from typing import Any
 import numpy as np
 
 from . import _learn_kernels as _lk
+from ._config import FitConfig
+from ._frame import HeightField, to_height_field
+from ._io import Scan
+from ._network import FitLog, Network
 from ._version import __version__
-from .config import FitConfig
 from .errors import FitError, ScanError
-from .frame import HeightField, to_height_field
-from .io import Scan
-from .network import FitLog, Network
 
 __all__ = ["fit", "learn", "learn_from", "auto_d_min", "residuals", "MIN_POINTS", "LearnedState",
            "NeuronCapWarning"]
@@ -252,7 +252,7 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     order : callable, optional
         ``order(rng)`` returns the replay order of one pass (a permutation of the N
         points), drawn from the seeded generator; default ``rng.permutation(N)``.
-        The streaming fit's block order (:func:`asrbf_mesh.stream.block_order`)
+        The streaming fit's block order (:func:`asrbf_mesh._stream.block_order`)
         given here reproduces a streaming fit in memory.
 
     Returns
@@ -297,7 +297,7 @@ def learn_from(batches: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], n: 
         Unit-square inputs (M, 2), unit depths (M,) and the indices of the points to
         learn from, in that order; ``n * config.passes`` indices over all batches.
         :func:`learn` feeds the whole height field once per pass; the streaming fit
-        (:mod:`asrbf_mesh.stream`) feeds blocks read from disk.
+        (:mod:`asrbf_mesh._stream`) feeds blocks read from disk.
     n : int
         Points in the scan (sizes the window of the growth criteria and the log).
     config : FitConfig
@@ -401,7 +401,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     >>> bool(net.info["ebar"] < 0.01)
     True
     """
-    from .polish import polish_full, polish_weights
+    from ._polish import polish_full, polish_weights
 
     cfg = (config or FitConfig()).replace(**overrides) if overrides else (config or FitConfig())
     if isinstance(scan, Scan):

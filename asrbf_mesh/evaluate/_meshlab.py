@@ -1,7 +1,7 @@
 """Adapter for :mod:`pymeshlab`: the only module of the package that imports it.
 
 Small typed functions that take and return numpy arrays or
-:class:`~asrbf_mesh.mesh.Mesh`. Each call builds a fresh ``pymeshlab.MeshSet`` and passes
+:class:`~asrbf_mesh._mesh.Mesh`. Each call builds a fresh ``pymeshlab.MeshSet`` and passes
 *every* parameter of every filter explicitly: pymeshlab remembers a filter's parameter
 values between calls in one process, even on a new MeshSet (DESIGN.md §3), so a default
 left implicit is whatever the previous caller set. Errors of pymeshlab surface as a
@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 import pymeshlab
 
-from .errors import AsrbfError
-from .io import Scan
-from .mesh import Mesh
+from .._io import Scan
+from .._mesh import Mesh, compact
+from ..errors import AsrbfError
 
 __all__ = [
     "hausdorff",
@@ -29,7 +29,6 @@ __all__ = [
     "quadric_edge_collapse",
     "ball_pivoting",
     "topological_measures",
-    "compact",
 ]
 
 _MIN_SAMPLES = 10_000
@@ -88,31 +87,6 @@ def _from_ml(m: pymeshlab.Mesh, *, normals: bool = False, quality: bool = False)
     if quality and m.has_vertex_scalar():
         vq = np.array(m.vertex_scalar_array(), dtype=np.float64)
     return Mesh(v, f, vertex_normals=vn, vertex_quality=vq)
-
-
-def compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Drop the vertices no face references (in numpy; keeps the others' order).
-
-    Parameters
-    ----------
-    vertices : (V, 3) array
-    faces : (F, 3) int array
-
-    Returns
-    -------
-    vertices : (V', 3) float64 array
-    faces : (F, 3) int64 array
-        Re-indexed into the kept vertices.
-
-    Examples
-    --------
-    >>> v, f = compact(np.zeros((5, 3)), np.array([[4, 1, 2]]))
-    >>> len(v), f.tolist()
-    (3, [[2, 0, 1]])
-    """
-    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    used = np.unique(f)
-    return np.asarray(vertices, dtype=np.float64)[used], np.searchsorted(used, f)
 
 
 # --------------------------------------------------------------------------- Hausdorff

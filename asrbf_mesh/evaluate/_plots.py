@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..mesh import Mesh
+from .._mesh import Mesh
 
 __all__ = ["figure", "render_error", "render_shaded", "save_figure"]
 

@@ -2,7 +2,7 @@
 
 ``f(x) = a0 + sum_k a_k exp(-||x - u_k||^2 / sigma_k^2)`` (paper, eqs. 1-2), learned
 in the unit square; :class:`Network` evaluates it in physical units through its
-:class:`~asrbf_mesh.frame.Frame`.
+:class:`~asrbf_mesh._frame.Frame`.
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ import numpy as np
 
 from . import _network_kernels as _nk
 from ._atomic import atomic_path, check_output_path
-from .config import FitConfig
+from ._config import FitConfig
+from ._frame import Frame
+from ._io import _one_line
 from .errors import AsrbfError, NetworkFileError
-from .frame import Frame
-from .io import _one_line
 
 __all__ = ["Network", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
 
@@ -147,7 +147,7 @@ class Network:
     Examples
     --------
     >>> import numpy as np
-    >>> from asrbf_mesh.frame import Frame
+    >>> from asrbf_mesh._frame import Frame
     >>> net = Network(0.5, np.array([[0.5, 0.5]]), np.array([0.2]), np.array([0.25]),
     ...               Frame(np.eye(3), np.zeros(3), np.ones(3)), FitConfig())
     >>> float(net.evaluate(np.array([[0.5, 0.5]]))[0])

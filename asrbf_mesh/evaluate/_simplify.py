@@ -15,19 +15,12 @@ import threading
 import fast_simplification
 import numpy as np
 
-from .errors import AsrbfError
-from .mesh import Mesh
+from .._mesh import Mesh, compact
+from ..errors import AsrbfError
 
 __all__ = ["fast_decimate"]
 
 _LOCK = threading.Lock()
-
-
-def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Drop unreferenced vertices, keeping the others' order (no pymeshlab import here)."""
-    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    used = np.unique(f)
-    return np.asarray(vertices, dtype=np.float64)[used], np.searchsorted(used, f)
 
 
 def fast_decimate(mesh: Mesh, *, target_faces: int, preserve_border: bool = True,
@@ -67,7 +60,7 @@ def fast_decimate(mesh: Mesh, *, target_faces: int, preserve_border: bool = True
 
     Examples
     --------
-    >>> from asrbf_mesh.surface import grid_faces
+    >>> from asrbf_mesh._surface import grid_faces
     >>> x, y = np.meshgrid(np.linspace(0, 1, 20), np.linspace(0, 1, 20))
     >>> v = np.c_[x.ravel(), y.ravel(), (x * y).ravel()]
     >>> out = fast_decimate(Mesh(v, grid_faces(20, 20)), target_faces=200,
@@ -83,7 +76,7 @@ def fast_decimate(mesh: Mesh, *, target_faces: int, preserve_border: bool = True
         raise AsrbfError(f"target_faces must be a positive integer, got {target_faces!r}")
     if not (np.isfinite(aggressiveness) and aggressiveness >= 0):
         raise AsrbfError(f"aggressiveness must be a number >= 0, got {aggressiveness!r}")
-    v, f = _compact(mesh.vertices, mesh.faces)
+    v, f = compact(mesh.vertices, mesh.faces)
     if target_faces >= len(f):
         return Mesh(v, f)
     try:
@@ -98,4 +91,4 @@ def fast_decimate(mesh: Mesh, *, target_faces: int, preserve_border: bool = True
     tris = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
     if len(tris) == 0:
         raise AsrbfError("fast-simplification returned an empty mesh")
-    return Mesh(*_compact(np.asarray(pts, dtype=np.float64), tris))
+    return Mesh(*compact(np.asarray(pts, dtype=np.float64), tris))

@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from .. import _meshlab
+from .._io import Scan
+from .._mesh import Mesh
 from ..errors import AsrbfError
-from ..io import Scan
-from ..mesh import Mesh
+from . import _meshlab
 
 __all__ = ["Direction", "MetroResult", "metro"]
 

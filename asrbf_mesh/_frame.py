@@ -15,8 +15,8 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ._io import _collinear_xy
 from .errors import ScanError
-from .io import _collinear_xy
 
 __all__ = ["Frame", "HeightField", "HeightFieldWarning", "DuplicatePointsWarning",
            "to_height_field", "fold_fraction", "duplicate_fraction", "sampling_spacing",

@@ -30,8 +30,8 @@ from pathlib import Path
 from typing import Any
 
 from ._atomic import atomic_path, check_output_dir
+from ._io import SUPPORTED_SCAN_FORMATS
 from .errors import AsrbfError, ConfigError
-from .io import SUPPORTED_SCAN_FORMATS
 
 __all__ = ["TASKS", "Job", "expand_inputs", "parse_seeds", "plan_jobs", "run_job",
            "run_batch", "summary_table"]

@@ -45,7 +45,7 @@ class FitConfig:
     d_min : float or None
         D_min, the final separation ("neuron separation level"). ``None``: twice
         the scan's sampling spacing measured from the data (section 5.1), but not
-        below E (see :func:`asrbf_mesh.learn.auto_d_min`).
+        below E (see :func:`asrbf_mesh._learn.auto_d_min`).
     gamma : float
         Decay factor of the separation distance, eq. (4).
     decay : {"observation", "neurons"}

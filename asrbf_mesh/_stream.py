@@ -10,7 +10,7 @@ through a byte-offset index), in passes:
    does) up to :data:`EXACT_SPACING_MAX` points, above that from every point in a
    seeded set of small tiles of the footprint (about 60,000 points), which also feed
    the height-field and duplicate warnings;
-3. learning, :data:`~asrbf_mesh.config.FitConfig.passes` times: the blocks in a seeded
+3. learning, :data:`~asrbf_mesh._config.FitConfig.passes` times: the blocks in a seeded
    random order, ``mix`` blocks at a time loaded together and replayed in a random
    order (:func:`block_order` is the whole order);
 4. the weight polish (two passes: normal equations, then the error) and the final
@@ -38,20 +38,20 @@ from typing import Any
 
 import numpy as np
 
-from . import polish as _polish
-from ._version import __version__
-from .config import FitConfig
-from .errors import ConfigError, ScanError
-from .frame import (
+from . import _polish
+from ._config import FitConfig
+from ._frame import (
     _AXES,
     check_height_field,
     frame_from_bounds,
     sampling_spacing,
     unit_height_field,
 )
-from .io import check_scan_path
-from .learn import MIN_POINTS, auto_d_min, learn_from
-from .network import Network
+from ._io import check_scan_path
+from ._learn import MIN_POINTS, auto_d_min, learn_from
+from ._network import Network
+from ._version import __version__
+from .errors import ConfigError, ScanError
 
 __all__ = ["fit_stream", "block_order", "open_points", "PointBlocks", "STREAM_FORMATS",
            "DEFAULT_CHUNK", "DEFAULT_MIX", "EXACT_SPACING_MAX"]

@@ -4,7 +4,7 @@
 NPY arrays) into an immutable :class:`Scan`: float64 points, optional triangles, and the
 range-grid shape when the file carried one (Stanford ``range_grid`` PLY files are
 triangulated the way MeshLab does it). :func:`save_mesh` writes a
-:class:`~asrbf_mesh.mesh.Mesh` as binary PLY, OBJ, OFF or binary STL, atomically.
+:class:`~asrbf_mesh._mesh.Mesh` as binary PLY, OBJ, OFF or binary STL, atomically.
 
 Every problem with an input file surfaces as a one-line
 :class:`~asrbf_mesh.errors.ScanError` that starts with the file's path.
@@ -24,8 +24,8 @@ import numpy as np
 import plyfile
 
 from ._atomic import atomic_path, check_output_path
+from ._mesh import Mesh
 from .errors import ConfigError, ScanError
-from .mesh import Mesh
 
 __all__ = [
     "Scan",
@@ -198,7 +198,7 @@ class Scan:
         return float(np.linalg.norm(np.ptp(self.points, axis=0)))
 
     def to_mesh(self) -> Mesh:
-        """Return the scan as a :class:`~asrbf_mesh.mesh.Mesh` (arrays are shared).
+        """Return the scan as a :class:`~asrbf_mesh._mesh.Mesh` (arrays are shared).
 
         Returns
         -------

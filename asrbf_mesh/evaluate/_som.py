@@ -5,7 +5,7 @@ online training; run compiled, equal to MiniSom's weights bit for bit) learns th
 scan's 3D points on the most square-like grid whose node count is closest to the
 network's K. Its nodes, and as many vertices sampled from our network
 over the scan's footprint, are each meshed by ball pivoting (MeshLab) and compared with
-the raw scan mesh by Metro distances (:func:`~asrbf_mesh.evaluate.metro.metro`).
+the raw scan mesh by Metro distances (:func:`~asrbf_mesh.evaluate._metro.metro`).
 
 Choices, each measured (see the functions): MiniSom's default schedule with a PCA
 start on standardised points, 500 training steps per node; dead nodes (the best match
@@ -13,7 +13,7 @@ of no point) dropped unless asked; our vertices spread evenly in 3D by farthest-
 sampling, as many as the SOM's meshed nodes; the ball radius is MeshLab's guess for
 both vertex sets.
 
->>> from asrbf_mesh.evaluate.som import compare_som      # doctest: +SKIP
+>>> from asrbf_mesh.evaluate._som import compare_som      # doctest: +SKIP
 >>> c = compare_som(scan, net, seed=0)                    # doctest: +SKIP
 >>> c.asrbf.rms_pct, c.som.rms_pct                        # doctest: +SKIP
 """
@@ -30,16 +30,16 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .. import _meshlab
+from .._footprint import Footprint
+from .._frame import sampling_spacing
+from .._io import Scan
+from .._mesh import Mesh
+from .._network import Network
+from .._surface import grid_faces
 from ..errors import AsrbfError, ScanError
-from ..footprint import Footprint
-from ..frame import sampling_spacing
-from ..io import Scan
-from ..mesh import Mesh
-from ..network import Network
-from ..surface import grid_faces
+from . import _meshlab
+from ._metro import MetroResult, metro
 from ._som_kernels import train_online
-from .metro import MetroResult, metro
 
 __all__ = ["SomMap", "SomComparison", "som_grid", "train_som", "network_vertices",
            "compare_som"]
@@ -376,7 +376,7 @@ def network_vertices(net: Network, n: int, footprint_scan: Scan | np.ndarray, *,
         Vertex count (>= 3).
     footprint_scan : Scan or (N, 3) array
         The scan whose footprint the vertices cover, world units (a bare point set is
-        triangulated in the view plane, see :class:`~asrbf_mesh.footprint.Footprint`).
+        triangulated in the view plane, see :class:`~asrbf_mesh._footprint.Footprint`).
     seed : int
         Seed of the area densification.
 
@@ -515,7 +515,7 @@ def compare_som(scan: Scan, net: Network | None = None, *, seed: int = 0,
     pivoting with MeshLab's own radius guess (the vertex set's bounding-box diagonal
     over the square root of its size; on bun000, 1.5 to 3 times that radius made the
     SOM's mesh worse on every measure); measure each mesh against the raw scan mesh
-    with :func:`~asrbf_mesh.evaluate.metro.metro`.
+    with :func:`~asrbf_mesh.evaluate._metro.metro`.
 
     Parameters
     ----------
@@ -553,7 +553,7 @@ def compare_som(scan: Scan, net: Network | None = None, *, seed: int = 0,
         Bad arguments, a network with fewer than 4 neurons, or a ball-pivoting mesh
         without faces.
     """
-    from ..learn import fit
+    from .._learn import fit
 
     if not isinstance(scan, Scan):
         raise ScanError(f"scan must be an asrbf_mesh.Scan, got {type(scan).__name__}")

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Mesh"]
+__all__ = ["Mesh", "compact"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,3 +61,28 @@ class Mesh:
     def n_faces(self) -> int:
         """Number of triangles."""
         return int(len(self.faces))
+
+
+def compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop the vertices no face references (in numpy; keeps the others' order).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array
+    faces : (F, 3) int array
+
+    Returns
+    -------
+    vertices : (V', 3) float64 array
+    faces : (F, 3) int64 array
+        Re-indexed into the kept vertices.
+
+    Examples
+    --------
+    >>> v, f = compact(np.zeros((5, 3)), np.array([[4, 1, 2]]))
+    >>> len(v), f.tolist()
+    (3, [[2, 0, 1]])
+    """
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    used = np.unique(f)
+    return np.asarray(vertices, dtype=np.float64)[used], np.searchsorted(used, f)

@@ -1,0 +1,360 @@
+"""Levels of detail (LOD) of a range scan from ASRBF networks.
+
+The paper (Meng et al. 2013) gives two ways to get a multi-resolution set of meshes
+from the learned representation:
+
+- ``resample``: one network, sampled on successively coarser grids (spacing
+  ``s0 * 2**i`` for level ``i``);
+- ``refit``: one network per level, learned with a coarser separation level
+  ``D_min = d0 * 2**i``, each sampled at a grid that matches its own detail, so every
+  level's network is itself compact.
+
+Level 0 is the finest; the index grows with coarseness (the usual LOD convention, and
+the one of the ``2**i`` formulas above). :func:`lod_set` returns the levels in that
+order, finest first. Every level is meshed on the scan's footprint, so its border
+stays where the scan's border is (within about a grid cell's diagonal of that level).
+
+:func:`write_lod_set` writes the meshes, the networks and a ``manifest.json`` with
+sizes and Metro-style errors against the scan, optionally beside quadric-decimation
+(QEM) baselines at the same face counts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tempfile
+import time
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from ._config import FitConfig
+from ._frame import Frame, to_height_field
+from ._io import Scan
+from ._learn import auto_d_min, fit
+from ._mesh import Mesh
+from ._network import Network
+from ._surface import reconstruct
+from .errors import AsrbfError, ConfigError
+
+__all__ = [
+    "LodLevel",
+    "lod_set",
+    "network_file_bytes",
+    "ply_bytes",
+    "METHODS",
+    "REFIT_GRID_PER_D_MIN",
+]
+
+Method = Literal["resample", "refit"]
+
+#: LOD methods of :func:`lod_set`.
+METHODS: tuple[str, ...] = ("resample", "refit")
+
+#: ``refit`` samples the network of separation ``D_min`` at a grid of ``D_min / 4``.
+REFIT_GRID_PER_D_MIN = 4.0
+
+
+
+@dataclass(frozen=True, eq=False)
+class LodLevel:
+    """One level of detail.
+
+    Parameters
+    ----------
+    index : int
+        Level number; 0 is the finest.
+    method : {"resample", "refit"}
+        How the level was made.
+    mesh : Mesh
+        The level's mesh, scan units.
+    network_bytes : int or None
+        Size of the level's network as a ``.asrbf`` file (float32 parameters, no
+        learning log; see :func:`network_file_bytes`). With ``resample`` every level
+        shares one network and reports its size.
+    d_min : float or None
+        D_min (unit square) of the level's network.
+    n_neurons : int or None
+        K of the level's network.
+    seconds : float
+        Wall time to make the level: grid evaluation (``resample``; the shared fit is
+        in ``network.info["fit_seconds"]``) or fit plus grid evaluation (``refit``).
+    spacing_abs : float or None
+        Grid spacing of the mesh, scan units.
+    network : Network or None
+        The network the mesh was sampled from (the same object for every level of a
+        ``resample`` set).
+    """
+
+    index: int
+    method: str
+    mesh: Mesh
+    network_bytes: int | None
+    d_min: float | None
+    n_neurons: int | None
+    seconds: float
+    spacing_abs: float | None = None
+    network: Network | None = None
+
+
+# --------------------------------------------------------------------------- sizes
+
+
+def _shippable(net: Network) -> Network:
+    """Return the network as shipped: without its learning log (saved as float32)."""
+    return dataclasses.replace(net, log=None)
+
+
+def _save_network(net: Network, path: Path, inputs: tuple[str, ...] = ()) -> Path:
+    return _shippable(net).save(path, float32=True, inputs=inputs)
+
+
+def network_file_bytes(net: Network) -> int:
+    """Size in bytes of ``net`` written as a ``.asrbf`` file for a LOD set.
+
+    The file is what :func:`write_lod_set` writes: float32 neuron parameters, frame,
+    configuration and provenance (JSON), deflated; without the learning log (a
+    history for plots, not part of the surface).
+
+    Examples
+    --------
+    >>> from asrbf_mesh._frame import Frame
+    >>> net = Network(0.0, np.zeros((3, 2)), np.ones(3), np.ones(3),
+    ...               Frame(np.eye(3), np.zeros(3), np.ones(3)), FitConfig())
+    >>> 1000 < network_file_bytes(net) < 4000
+    True
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        return _save_network(net, Path(tmp) / "n.asrbf").stat().st_size
+
+
+def ply_bytes(n_vertices: int, n_faces: int) -> int:
+    """Size of a triangle mesh as a binary PLY of float32 vertices and int32 faces.
+
+    The header below, ``12`` bytes per vertex (x, y, z float32) and ``13`` per face (a
+    uchar count and three int32 indices). This is how the QEM baselines' size is
+    counted: the smallest usual file that stores a mesh as it is.
+
+    Examples
+    --------
+    >>> ply_bytes(3, 1)
+    218
+    """
+    header = ("ply\nformat binary_little_endian 1.0\n"
+              f"element vertex {int(n_vertices)}\n"
+              "property float x\nproperty float y\nproperty float z\n"
+              f"element face {int(n_faces)}\n"
+              "property list uchar int vertex_indices\nend_header\n")
+    return len(header.encode()) + 12 * int(n_vertices) + 13 * int(n_faces)
+
+
+def _grid_cells(mesh: Mesh, frame: Frame, spacing_abs: float) -> tuple[np.ndarray, int, int]:
+    """Grid cells (j, i) of a mesh made by :func:`~asrbf_mesh._surface.reconstruct`."""
+    span = frame.scale[:2]
+    nx = max(int(round(span[0] / spacing_abs)) + 1, 2)
+    ny = max(int(round(span[1] / spacing_abs)) + 1, 2)
+    step = span / np.array([nx - 1, ny - 1])
+    local = (mesh.vertices @ frame.rotation)[:, :2]
+    ij = np.rint((local - frame.offset[:2]) / step).astype(np.int64)
+    cell = ij[mesh.faces].min(axis=1)
+    return cell, nx, ny
+
+
+def _footprint_bytes(mesh: Mesh, frame: Frame, spacing_abs: float) -> int:
+    """Deflated size of the bitmap of grid cells a level keeps (one bit per cell)."""
+    cell, nx, ny = _grid_cells(mesh, frame, spacing_abs)
+    mask = np.zeros((ny - 1, nx - 1), dtype=bool)
+    ok = (cell[:, 0] >= 0) & (cell[:, 0] < nx - 1) & (cell[:, 1] >= 0) & (cell[:, 1] < ny - 1)
+    mask[cell[ok, 1], cell[ok, 0]] = True
+    return len(zlib.compress(np.packbits(mask).tobytes(), 9))
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _as_scan(scan: Scan | np.ndarray) -> Scan:
+    if isinstance(scan, Scan):
+        return scan
+    if isinstance(scan, Mesh):
+        return Scan(scan.vertices, scan.faces)
+    try:
+        return Scan(np.asarray(scan))
+    except (TypeError, ValueError) as exc:
+        raise AsrbfError(f"scan must be a Scan or an (N, 3) array of points ({exc})") from None
+
+
+def _is_int(v: object, lo: int) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo
+
+
+def _check_d_mins(d_mins: Any, levels: int) -> list[float]:
+    try:
+        out = [float(d) for d in d_mins]
+    except (TypeError, ValueError):
+        raise ConfigError(
+            f"d_mins must be a sequence of {levels} numbers, got {d_mins!r}") from None
+    if len(out) != levels:
+        raise ConfigError(f"d_mins must hold one D_min per level ({levels}), got {len(out)}")
+    if not all(math.isfinite(d) and d > 0 for d in out):
+        raise ConfigError(f"d_mins must be positive finite numbers (unit square), got {out}")
+    if any(b < a for a, b in zip(out[:-1], out[1:], strict=True)):
+        raise ConfigError(f"d_mins must not decrease with the level (level 0 is the finest), "
+                          f"got {out}")
+    return out
+
+
+# --------------------------------------------------------------------------- lod_set
+
+
+def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resample",
+            net: Network | None = None, seed: int = 0, d_mins: list[float] | None = None,
+            footprint: bool = True, base_resolution: int | None = None) -> list[LodLevel]:
+    """Build a set of levels of detail of a range scan.
+
+    Parameters
+    ----------
+    scan : Scan or (N, 3) array
+        The range scan, scan units (view axis z unless ``net`` says otherwise).
+    levels : int
+        Number of levels (>= 1).
+    method : {"resample", "refit"}
+        ``resample``: one network sampled at grid spacings ``s0 * 2**i``, where ``s0`` is
+        the scan's own sampling spacing. ``refit``: one fit per level with
+        ``D_min = d0 * 2**i`` (``d0``: the automatic D_min of the scan, 0.01 for the
+        paper's defaults and the scans shipped here), sampled at spacing ``D_min / 4``
+        in scan units (level 0 not finer than the scan's spacing, the others scaled
+        with D_min from it).
+    net : Network, optional
+        ``resample``: the network to sample (default: ``fit(scan, seed=seed)``).
+        ``refit``: its configuration (and view axis) is the base of every level's fit,
+        only D_min changes.
+    seed : int
+        Seed of the fits.
+    d_mins : sequence of float, optional
+        ``refit``: the D_min of each level (unit square), non-decreasing.
+    footprint : bool
+        Mesh only the scan's footprint (its triangles and the holes they enclose:
+        :func:`~asrbf_mesh._surface.reconstruct` mode ``scan``), so the border stays the
+        scan's. False: the whole normalized square.
+    base_resolution : int, optional
+        Samples along the longer side of the level-0 grid, instead of the default
+        spacing above; coarser levels scale it by ``2**i`` (``resample``) or by
+        ``D_min_i / D_min_0`` (``refit``).
+
+    Returns
+    -------
+    list of LodLevel
+        Finest first: ``levels[i].index == i`` and face counts decrease with ``i``.
+
+    Raises
+    ------
+    ConfigError
+        Bad ``levels``, ``method``, ``d_mins`` or ``base_resolution``.
+    ScanError
+        Unusable scan points.
+    AsrbfError
+        A grid too large, or a footprint that selects no cell.
+
+    Notes
+    -----
+    Why ``D_min / 4`` for ``refit``: a network of separation D_min has Gaussians as
+    narrow as ``psi * D_min = 0.7 D_min``; a grid of a quarter of D_min puts about
+    three samples across the narrowest one. On the face map (BENCHMARKS.md, "LOD"),
+    that came within 0-20 % of each network's own RMS error (its mesh at the scan's
+    spacing) at D_min = 0.01 ... 0.08, where ``D_min / 2`` was 2-75 % above it and
+    ``D_min`` 7-195 %.
+
+    ``resample`` samples without prefiltering: the narrow Gaussians of a fine network
+    alias on coarse grids. On the face map the coarsest resampled level (RMS 0.52 % of
+    the diagonal, 4,040 faces) lost to the coarsest refit level (0.38 %, 2,958 faces);
+    on bun000 it did not (0.27 % against 0.36 %, both 1,754 faces).
+
+    References
+    ----------
+    Meng, Q., Li, B., Holstein, H., Liu, Y. "Parameterization of point-cloud freeform
+    surfaces using adaptive sequential learning RBF networks", Pattern Recognition 46
+    (2013): multi-resolution representation from one network or from networks of
+    several separation levels.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.random((2000, 2))
+    >>> pts = np.c_[xy, 0.2 * np.sin(4 * xy[:, 0])]
+    >>> lods = lod_set(pts, levels=3)
+    >>> [lv.index for lv in lods], lods[0].n_neurons == lods[2].n_neurons
+    ([0, 1, 2], True)
+    >>> lods[0].mesh.n_faces > lods[1].mesh.n_faces > lods[2].mesh.n_faces
+    True
+    """
+    if not _is_int(levels, 1):
+        raise ConfigError(f"levels must be an integer >= 1, got {levels!r}")
+    if method not in METHODS:
+        raise ConfigError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    if base_resolution is not None and not _is_int(base_resolution, 2):
+        raise ConfigError(f"base_resolution must be an integer >= 2, got {base_resolution!r}")
+    if net is not None and not isinstance(net, Network):
+        raise ConfigError(f"net must be a Network, got {type(net).__name__}")
+    if not isinstance(footprint, bool):
+        raise ConfigError(f"footprint must be True or False, got {footprint!r}")
+    if d_mins is not None and method != "refit":
+        raise ConfigError("d_mins applies to method 'refit' only")
+    sc = _as_scan(scan)
+    fp_kw: dict[str, Any] = {"footprint": sc, "mode": "scan"} if footprint else {}
+
+    if method == "resample":
+        if net is None:
+            net = fit(sc, seed=seed, progress=False)
+        frame = net.frame
+        gmean = float(np.sqrt(frame.scale[0] * frame.scale[1]))
+        if base_resolution is not None:
+            s0 = float(frame.scale[:2].max()) / (base_resolution - 1)
+        else:
+            spacing = net.info.get("spacing")
+            if not spacing:
+                spacing = to_height_field(sc.points, view_axis=frame.view_axis).spacing
+            s0 = float(spacing) * gmean
+        nbytes = network_file_bytes(net)
+        out = []
+        for i in range(levels):
+            t = time.perf_counter()
+            mesh = reconstruct(net, spacing_abs=s0 * 2**i, **fp_kw)
+            d_min = net.info.get("d_min")
+            out.append(LodLevel(i, "resample", mesh, nbytes,
+                                None if d_min is None else float(d_min), net.n_neurons,
+                                time.perf_counter() - t, s0 * 2**i, net))
+        return out
+
+    # refit
+    base_cfg = net.config if net is not None else FitConfig()
+    view_axis = net.frame.view_axis if net is not None else "z"
+    hf = to_height_field(sc.points, view_axis=view_axis)  # type: ignore[arg-type]
+    if d_mins is None:
+        d0 = base_cfg.d_min if base_cfg.d_min is not None else auto_d_min(
+            hf.spacing, base_cfg.error_threshold)
+        dm = [d0 * 2**i for i in range(levels)]
+    else:
+        dm = _check_d_mins(d_mins, levels)
+    if dm[-1] > base_cfg.d_max:
+        raise ConfigError(f"the coarsest D_min ({dm[-1]:g}) exceeds D_max ({base_cfg.d_max:g}): "
+                          "use fewer levels or a larger d_max")
+    gmean = float(np.sqrt(hf.frame.scale[0] * hf.frame.scale[1]))
+    floor = hf.spacing * gmean
+    if base_resolution is not None:
+        s0 = float(hf.frame.scale[:2].max()) / (base_resolution - 1)
+    else:
+        s0 = max(dm[0] / REFIT_GRID_PER_D_MIN * gmean, floor)
+    spacings = [s0 * d / dm[0] for d in dm]
+    out = []
+    for i, (d, s) in enumerate(zip(dm, spacings, strict=True)):
+        t = time.perf_counter()
+        ni = fit(sc, base_cfg.replace(d_min=d), seed=seed, view_axis=view_axis, progress=False)
+        mesh = reconstruct(ni, spacing_abs=s, **fp_kw)
+        seconds = time.perf_counter() - t
+        out.append(LodLevel(i, "refit", mesh, network_file_bytes(ni), d, ni.n_neurons,
+                            seconds, s, ni))
+    return out
