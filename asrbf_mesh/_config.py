@@ -3,7 +3,7 @@
 Defaults follow section 5.1 of the paper (Meng et al., "Parameterization of
 point-cloud freeform surfaces using adaptive sequential learning RBF networks"),
 expressed in the unit cube; the places where the paper is silent or where its
-rule does not work as written are documented per field and in DESIGN.md §3.
+rule does not work as written are documented per field and in docs/design.md.
 """
 
 from __future__ import annotations

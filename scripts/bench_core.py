@@ -4,7 +4,7 @@
     python scripts/bench_core.py --only speed fidelity
 
 Uses the face range map shipped with pymeshlab and, when present, the Stanford
-bunny scans in ../shared/data/stanford-bunny (or $ASRBF_BUNNY_DIR).
+bunny scans in the folder $ASRBF_BUNNY_DIR names (when set).
 """
 
 from __future__ import annotations

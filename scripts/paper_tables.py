@@ -5,7 +5,7 @@
 Meng, Li, Holstein & Liu, "Parameterization of point-cloud freeform surfaces using
 adaptive sequential learning RBF networks", Pattern Recognition 46 (2013): Tables 1-4 and
 Figs. 5, 6, 7, 9, 11 and 12, measured on the face range map shipped with pymeshlab and the
-four Stanford bunny scans in ../shared/data/stanford-bunny (or $ASRBF_BUNNY_DIR). The
+four Stanford bunny scans in the folder $ASRBF_BUNNY_DIR names. The
 paper's own scans (cow, face, Santa, valve) are not public: its figures are quoted beside
 ours and compared by trend and ratio. Every number of ours is measured by this run; the
 same seeds give the same networks, errors and neuron counts (timings vary).

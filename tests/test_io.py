@@ -4,7 +4,7 @@
 the Stanford bunny range scan ``bun000.ply`` (Stanford 3D Scanning Repository,
 Stanford University Computer Graphics Laboratory), written as ASCII PLY with the
 original header style; its vertices are the ones the crop references, renumbered in
-their original order. The full scans in /work/shared/data are optional.
+their original order. The full scans ($ASRBF_BUNNY_DIR) are optional.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from asrbf_mesh.errors import AsrbfError, ConfigError, ScanError
 
 DATA = Path(__file__).parent / "data"
 CROP = DATA / "bun000_crop.ply"
-BUNNY_DIR = Path("/work/shared/data/stanford-bunny")
+BUNNY_DIR = Path(os.environ.get("ASRBF_BUNNY_DIR") or "/nonexistent")
 
 
 # ----------------------------------------------------------------------------- fixtures
