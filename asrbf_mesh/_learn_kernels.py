@@ -511,7 +511,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
         y = X[i, 1]
         z = Z[i]
 
-        # Stage 1: network output, residual (r = z - f, see docs/design.md "Residual sign"), windowed RMS.
+        # Stage 1: network output, residual (r = z - f: docs/design.md), windowed RMS.
         fk, sabs, m = _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count,
                                      sup_idx, sup_phi, sup_d2)
         r = z - (fs[FS_A0] + fk)

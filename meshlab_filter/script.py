@@ -24,7 +24,7 @@ Values are JSON values, except:
 Every step is checked before the first runs (JSON shape, filter names; parameter names,
 types and values of our filters), so a typo does not leave a half-run script. Parameters
 a step leaves out take their defaults; pymeshlab may remember a filter's values between
-calls in one process (docs/design.md, "Facts measured"), so name every parameter of a pymeshlab filter
+calls in one process (docs/design.md), so name every parameter of a pymeshlab filter
 whose value matters.
 """
 

@@ -3,7 +3,7 @@
 Small typed functions that take and return numpy arrays or
 :class:`~asrbf_mesh._mesh.Mesh`. Each call builds a fresh ``pymeshlab.MeshSet`` and passes
 *every* parameter of every filter explicitly: pymeshlab remembers a filter's parameter
-values between calls in one process, even on a new MeshSet (docs/design.md, "Facts measured"), so a default
+values between calls in one process, even on a new MeshSet (docs/design.md), so a default
 left implicit is whatever the previous caller set. Errors of pymeshlab surface as a
 one-line :class:`~asrbf_mesh.errors.AsrbfError`.
 
@@ -285,7 +285,7 @@ def repair_non_manifold(vertices: np.ndarray, faces: np.ndarray, *,
     (``meshing_repair_non_manifold_edges``, method "Remove Faces"), then splits every
     non-manifold vertex into one copy per fan (``meshing_repair_non_manifold_vertices``,
     no displacement). Raw range scans all have such vertices where two triangles touch
-    at a corner (docs/design.md, "Facts measured"); topology tools disagree on them until they are split.
+    at a corner (docs/design.md); topology tools disagree on them until they are split.
 
     Parameters
     ----------
@@ -340,7 +340,7 @@ def close_holes(mesh: Mesh, *, max_hole_edges: int) -> Mesh:
     unreferenced vertices are kept), then runs ``meshing_close_holes`` with
     ``selfintersection=False``: its default (True) rejects fills that would
     self-intersect and silently left gaps in 4 of 45 holes of the face map
-    (docs/design.md, "Facts measured"). ``get_topological_measures`` is never called on that MeshSet: run
+    (docs/design.md). ``get_topological_measures`` is never called on that MeshSet: run
     before it, it made the filter close almost nothing.
 
     Parameters

@@ -5,7 +5,7 @@ keeps its mesh in module-level C++ state between ``load`` and ``simplify``: call
 not thread-safe, so this adapter serializes them with a lock.
 
 Written against fast-simplification 0.2 (``preserve_border`` exists since 0.1.9;
-without it the decimation erodes a range scan's open border, docs/design.md, "Facts measured").
+without it the decimation erodes a range scan's open border, docs/design.md).
 """
 
 from __future__ import annotations

@@ -530,7 +530,7 @@ def compare_som(scan: Scan, net: Network | None = None, *, seed: int = 0,
     iterations : int, optional
         SOM training steps (default: see :func:`train_som`).
     keep_dead : bool
-        Mesh the dead SOM nodes too. Default False (docs/design.md, "Facts measured"): they win no
+        Mesh the dead SOM nodes too. Default False (docs/design.md): they win no
         scan point and float between the surface's parts (across holes, folds and
         occlusion gaps). Measured on the face map and the four bunny scans (seeds 0
         and 1), keeping them moves the SOM's figures both ways: lower Hausdorff and
