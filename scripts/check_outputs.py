@@ -3,8 +3,9 @@
 The manifest pins what the command line produces, so that two versions of the code (e.g.
 before and after a refactor) or two runs of the same code can be compared::
 
-    python scripts/check_outputs.py --root /work/before --out /tmp/outs_before
-    python scripts/check_outputs.py --root /work/main --out /tmp/outs_after
+    git worktree add ../before REV   # the code before the change
+    python scripts/check_outputs.py --root ../before --out /tmp/outs_before
+    python scripts/check_outputs.py --root . --out /tmp/outs_after
     python scripts/check_outputs.py --diff /tmp/outs_before/manifest.json \\
         /tmp/outs_after/manifest.json
 
@@ -51,7 +52,6 @@ from typing import Any
 
 import numpy as np
 
-DEFAULT_PYTHON = "/work/main/.venv/bin/python"
 DEFAULT_ROOT = Path(__file__).resolve().parent.parent
 
 # Keys whose values change from run to run (wall-clock figures, versions, machine names);
@@ -379,8 +379,7 @@ def main(argv: list[str] | None = None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--root", default=str(DEFAULT_ROOT),
                    help="source root put first on PYTHONPATH [default: %(default)s]")
-    p.add_argument("--python", default=DEFAULT_PYTHON if Path(DEFAULT_PYTHON).exists()
-                   else sys.executable,
+    p.add_argument("--python", default=sys.executable,
                    help="python command to run the CLI with (may hold arguments) "
                         "[default: %(default)s]")
     p.add_argument("--out", help="output folder: OUT/manifest.json, OUT/timings.json, OUT/work")
