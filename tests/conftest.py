@@ -10,12 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _grids import X0, XS, Y0, YS, Z0, ZS  # the mm frame; gridded scans: tests/_grids.py
 
 import asrbf_mesh as am
-
-X0, XS = 100.0, 80.0  # x in [100, 180] mm
-Y0, YS = 20.0, 60.0  # y in [20, 80] mm
-Z0, ZS = 5.0, 20.0  # depth offset and scale of the unit-square height functions
 
 
 def franke(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _grids import height_grid
 
 import asrbf_mesh as am
 from asrbf_mesh._batch import (
@@ -49,17 +50,9 @@ def scans(tmp_path_factory) -> dict[str, Path]:
     # a small range grid with a hole, as a mesh: for fill-holes, lod and compare
     g = 36
     yy, xx = np.mgrid[0:g, 0:g].astype(float)
-    z = 3 * np.sin(xx / 7) * np.cos(yy / 9)
     keep = (xx - 18) ** 2 + (yy - 17) ** 2 > 16
-    idx = -np.ones((g, g), int)
-    idx[keep] = np.arange(keep.sum())
-    faces = []
-    for r in range(g - 1):
-        for c in range(g - 1):
-            a, b, e, f = idx[r, c], idx[r, c + 1], idx[r + 1, c], idx[r + 1, c + 1]
-            if min(a, b, e, f) >= 0:
-                faces += [[a, b, f], [a, f, e]]
-    mesh = am.Mesh(np.c_[xx[keep], yy[keep], z[keep]], np.array(faces))
+    mesh = am.Mesh(*height_grid(lambda x, y: 3 * np.sin(x / 7) * np.cos(y / 9), g, g,
+                                x=(0, g - 1), y=(0, g - 1), valid=keep))
     out["grid"] = d / "grid.ply"
     am.save_mesh(mesh, out["grid"])
     return out

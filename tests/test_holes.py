@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from _grids import height_grid
 
 import asrbf_mesh as am
 from asrbf_mesh._holes import fill_holes, parse_size, punch_holes
@@ -17,12 +18,8 @@ from asrbf_mesh.errors import AsrbfError
 
 def grid_scan(fn, nx=70, ny=50, size=(70.0, 50.0), seed=0) -> am.Scan:
     """A range-grid-like scan in mm: vertices on a lightly jittered grid, two triangles a cell."""
-    rng = np.random.default_rng(seed)
-    x, y = np.meshgrid(np.linspace(0, size[0], nx), np.linspace(0, size[1], ny))
-    x = x + rng.uniform(-0.1, 0.1, x.shape)
-    y = y + rng.uniform(-0.1, 0.1, y.shape)
-    pts = np.column_stack([x.ravel(), y.ravel(), fn(x.ravel(), y.ravel())])
-    return am.Scan(pts, grid_faces(nx, ny))
+    return am.Scan(*height_grid(fn, nx, ny, x=(0, size[0]), y=(0, size[1]), jitter=0.1,
+                                seed=seed))
 
 
 def plane(x, y):

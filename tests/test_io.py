@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import _grids
 import numpy as np
 import plyfile
 import pytest
@@ -47,12 +48,7 @@ def grid_points(nx: int = 4, ny: int = 3, z: float | None = None) -> np.ndarray:
 
 def grid_faces(nx: int = 4, ny: int = 3) -> np.ndarray:
     """Counter-clockwise (seen from +z) triangles of :func:`grid_points`."""
-    out = []
-    for r in range(ny - 1):
-        for c in range(nx - 1):
-            a, b, d, e = r * nx + c, r * nx + c + 1, (r + 1) * nx + c, (r + 1) * nx + c + 1
-            out += [(a, b, e), (a, e, d)]
-    return np.array(out)
+    return _grids.grid_faces(nx, ny)
 
 
 @pytest.fixture

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import plyfile
 import pytest
+from _grids import mm_grid
 
 import asrbf_mesh as am
 from asrbf_mesh._lod import LodLevel, lod_set, network_file_bytes, ply_bytes
-from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.errors import AsrbfError, ConfigError
 from asrbf_mesh.evaluate import QEM_BASELINES, _simplify, write_lod_set
 
@@ -33,10 +33,7 @@ def franke_scan(syn, notch: bool = True) -> am.Scan:
     With ``notch``, the faces within 25 mm of the corner (180, 80) are cut away, so the
     border is curved and concave; unreferenced points are dropped.
     """
-    u, v = np.meshgrid(np.linspace(0, 1, NX), np.linspace(0, 1, NY))
-    u, v = u.ravel(), v.ravel()
-    pts = np.column_stack([100 + 80 * u, 20 + 60 * v, 5 + 20 * syn.franke(u, v)])
-    faces = grid_faces(NX, NY)
+    pts, faces = mm_grid(syn.franke, NX, NY)
     if notch:
         c = pts[faces].mean(axis=1)
         faces = faces[np.hypot(c[:, 0] - 180, c[:, 1] - 80) > 25]

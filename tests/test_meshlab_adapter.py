@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _grids import height_grid, mm_grid
 
 import asrbf_mesh as am
-from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.errors import AsrbfError
 from asrbf_mesh.evaluate import _meshlab as ml
 
@@ -15,10 +15,7 @@ NX, NY = 60, 50  # samples along x (80 mm) and y (60 mm)
 
 def grid_mesh(func, nx: int = NX, ny: int = NY) -> am.Mesh:
     """A gridded height field in mm: x in [100, 180], y in [20, 80], z = 5 + 20 func."""
-    u, v = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny))
-    pts = np.column_stack([100 + 80 * u.ravel(), 20 + 60 * v.ravel(),
-                           5 + 20 * func(u.ravel(), v.ravel())])
-    return am.Mesh(pts, grid_faces(nx, ny))
+    return am.Mesh(*mm_grid(func, nx, ny))
 
 
 @pytest.fixture(scope="module")
@@ -165,11 +162,9 @@ def test_repair_rejects_bad_faces() -> None:
 
 def holed_grid(n: int = 20) -> am.Mesh:
     """A flat n x n grid without the faces of one interior 2 x 2 block (a 8-edge hole)."""
-    u, v = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
-    pts = np.column_stack([u.ravel(), v.ravel(), 0.1 * u.ravel() * v.ravel()])
     keep = np.ones((n - 1, n - 1), bool)
     keep[8:10, 8:10] = False
-    return am.Mesh(pts, grid_faces(n, n, keep))
+    return am.Mesh(*height_grid(lambda u, v: 0.1 * u * v, n, n, keep=keep))
 
 
 def test_close_holes_fills_small_holes_only() -> None:

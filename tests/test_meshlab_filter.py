@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pymeshlab
 import pytest
+from _grids import mm_grid
 
 import asrbf_mesh as am
 import meshlab_filter as mf
-from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.errors import AsrbfError
 from meshlab_filter._bridge import NetworkCache, layer_scan
 
@@ -30,10 +30,7 @@ def bump(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def bump_arrays(holes=(BIG, SMALL)) -> tuple[np.ndarray, np.ndarray]:
     """A gridded bump in mm (z = 5 + 20 bump) with the faces of round holes removed."""
-    u, v = np.meshgrid(np.linspace(0, 1, NX), np.linspace(0, 1, NY))
-    pts = np.column_stack([100 + 80 * u.ravel(), 20 + 60 * v.ravel(),
-                           5 + 20 * bump(u.ravel(), v.ravel())])
-    faces = grid_faces(NX, NY)
+    pts, faces = mm_grid(bump, NX, NY)
     centroid = pts[faces].mean(axis=1)[:, :2]
     keep = np.ones(len(faces), dtype=bool)
     for centre, radius in holes:

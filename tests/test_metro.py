@@ -6,18 +6,16 @@ import json
 
 import numpy as np
 import pytest
+from _grids import height_grid
 
 import asrbf_mesh as am
-from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.cli import main
 from asrbf_mesh.errors import AsrbfError
 from asrbf_mesh.evaluate import MetroResult, metro
 
 
 def sheet(n: int = 30, size: float = 10.0, z=lambda x, y: 0.02 * x * y) -> am.Mesh:
-    x, y = np.meshgrid(np.linspace(0, size, n), np.linspace(0, size, n))
-    v = np.column_stack([x.ravel(), y.ravel(), z(x.ravel(), y.ravel())])
-    return am.Mesh(v, grid_faces(n, n))
+    return am.Mesh(*height_grid(z, n, n, x=(0, size), y=(0, size)))
 
 
 def flat(n: int = 20, size: float = 10.0) -> am.Mesh:
