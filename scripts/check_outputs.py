@@ -11,9 +11,9 @@ before and after a refactor) or two runs of the same code can be compared::
 
 Each command runs as ``PYTHON -m asrbf_mesh.cli ...`` in a subprocess, with ``--root`` first
 on ``PYTHONPATH`` (checked: ``asrbf_mesh`` and ``meshlab_filter`` must import from there) and
-``OUT/work`` as its working folder. The scans are copied to ``OUT/work/inputs`` and every
+``OUT/runs`` as its working folder. The scans are copied to ``OUT/runs/inputs`` and every
 path on a command line is relative, so the outputs do not depend on where the code or the
-work folder is. Each command writes into its own folder ``OUT/work/<step>/``. The
+work folder is. Each command writes into its own folder ``OUT/runs/<step>/``. The
 subprocesses get ``PYTHONHASHSEED=0`` and ``MPLBACKEND=Agg``.
 
 ``OUT/manifest.json`` holds per command: the arguments, the exit code, the first line of
@@ -142,7 +142,7 @@ class Normalizer:
         for p, tag in prefixes.items():
             pairs[p] = tag
             pairs[os.path.realpath(p)] = tag
-        # longest first, so /a/b/work wins over /a/b
+        # longest first, so /a/b/runs wins over /a/b
         self.prefixes = sorted(pairs.items(), key=lambda x: -len(x[0]))
 
     def text(self, s: str) -> str:
@@ -268,9 +268,9 @@ def _probe(python: list[str], root: Path, env: dict[str, str]) -> dict[str, str]
 
 def _prepare(out: Path, root: Path, bunny: Path, face: Path) -> Path:
     if out.exists() and any(out.iterdir()) and not (out / "manifest.json").exists() \
-            and not (out / "work").exists():
+            and not (out / "runs").exists():
         sys.exit(f"check_outputs: {out} is not empty and not an earlier output folder")
-    work = out / "work"
+    work = out / "runs"
     if work.exists():
         shutil.rmtree(work)
     (work / "inputs").mkdir(parents=True)
@@ -382,7 +382,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--python", default=sys.executable,
                    help="python command to run the CLI with (may hold arguments) "
                         "[default: %(default)s]")
-    p.add_argument("--out", help="output folder: OUT/manifest.json, OUT/timings.json, OUT/work")
+    p.add_argument("--out", help="output folder: OUT/manifest.json, OUT/timings.json, OUT/runs")
     p.add_argument("--bunny", help="the small scan [default: ROOT/tests/data/bun000_crop.ply]")
     p.add_argument("--only", nargs="+", metavar="STEP", help="run only these steps")
     p.add_argument("--list", action="store_true", help="list the steps and exit")
