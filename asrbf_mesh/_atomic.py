@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import contextlib
+import fnmatch
 import os
+import shutil
+import signal
 import tempfile
-from collections.abc import Iterator
+import threading
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from .errors import AsrbfError
 
-__all__ = ["atomic_path", "check_output_dir", "check_output_path"]
+__all__ = ["atomic_dir", "atomic_path", "check_output_dir", "check_output_path"]
 
 
 def check_output_path(path: str | os.PathLike, *inputs: str | os.PathLike | None) -> Path:
@@ -90,4 +94,121 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
+        raise
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back while a few renames or a cleanup run (main thread only).
+
+    A signal that arrives meanwhile is delivered to the previous handler at the end, so
+    an interrupted command still stops, but never halfway through moving its outputs.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list[int] = []
+    old = {s: signal.signal(s, lambda signum, frame: got.append(signum))
+           for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        if got:
+            handler = old[got[0]]
+            if callable(handler):
+                handler(got[0], None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(got[0])
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; return those created, deepest first."""
+    missing = []
+    p = folder
+    while not p.exists() and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise AsrbfError(f"{folder}: cannot create the output folder ({exc.strerror})") from None
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for p in folders:
+        with contextlib.suppress(OSError):
+            p.rmdir()
+
+
+def _swap_in(new: Path, out: Path) -> None:
+    """Rename ``new`` onto ``out``, an existing folder: old aside, new in, old deleted."""
+    aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+    os.replace(out, aside)  # onto the empty folder just made
+    try:
+        os.replace(new, out)
+    except BaseException:
+        os.replace(aside, out)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
+
+
+def _install(tmp: Path, out: Path, owns: Sequence[str]) -> None:
+    if not out.exists():
+        os.replace(tmp, out)
+        return
+    entries = list(out.iterdir())
+    if all(any(fnmatch.fnmatch(e.name, pat) for pat in owns) for e in entries):
+        _swap_in(tmp, out)  # empty, or a previous run's: its stale files go
+        return
+    # a folder holding other files too: move the new entries in, leave the others
+    for entry in sorted(tmp.iterdir()):
+        target = out / entry.name
+        if target.is_dir() and not target.is_symlink():
+            _swap_in(entry, target)
+        else:
+            os.replace(entry, target)
+    tmp.rmdir()
+
+
+@contextlib.contextmanager
+def atomic_dir(path: str | os.PathLike, owns: Sequence[str] = ()) -> Iterator[Path]:
+    """Yield a hidden temporary folder beside ``path``; it takes the place of ``path`` on success.
+
+    The folder output appears whole or not at all: the work writes into
+    ``.NAME.tmp-XXXX`` in the same parent (created with its missing parents), renamed
+    onto ``path`` at the end. An existing ``path`` that is empty or holds only names
+    matching the glob patterns ``owns`` (a previous run of the same command) is
+    replaced, so files of the earlier run do not linger; a folder holding anything
+    else keeps it, and receives the new entries one by one. On any exception
+    (interrupts included) the temporary folder and the parents created are removed.
+
+    Raises
+    ------
+    AsrbfError
+        If ``path`` is a file, or the folder cannot be created.
+    """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise AsrbfError(f"{out}: output path exists and is not a folder")
+    parent = out.parent if str(out.parent) else Path(".")
+    created = _make_parents(parent)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=parent))
+    except OSError as exc:
+        _remove_empty(created)
+        raise AsrbfError(f"{out}: cannot write in {parent} ({exc.strerror})") from None
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp creates 0700; outputs get normal permissions
+    try:
+        yield tmp
+        with _signals_held():
+            _install(tmp, out, owns)
+    except BaseException:
+        with _signals_held():
+            shutil.rmtree(tmp, ignore_errors=True)
+            _remove_empty(created)
         raise

@@ -1,7 +1,8 @@
 """Batch processing of many scans on dask.distributed (``asrbf batch``).
 
-One task per (file, seed): a worker receives the path, runs the same code as the
-single-file command (``asrbf fit`` / ``fill-holes`` / ``lod`` / ``compare``) and writes
+One task per (file, seed): a worker receives the path, calls the same task function as
+the single-file command (:mod:`asrbf_mesh.tasks`: ``fit`` / ``fill_holes`` / ``lod`` /
+``compare``, with the options validated before any job was submitted) and writes
 its outputs and a ``record.json`` into ``OUTDIR/<name>/``; only the small record comes
 back through the scheduler, never a mesh. A file that fails is recorded with its one-line
 error and the batch goes on. By default a local cluster of single-threaded worker
@@ -19,18 +20,19 @@ Install with ``pip install 'asrbf-mesh[batch]'``.
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import os
 import sys
 import time
-from collections.abc import Iterable, Sequence
+import warnings
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ._atomic import atomic_path, check_output_dir
 from ._io import SUPPORTED_SCAN_FORMATS
+from ._validate import jsonable, strict_json
 from .errors import AsrbfError, ConfigError
 
 __all__ = ["TASKS", "Job", "expand_inputs", "parse_seeds", "plan_jobs", "run_job",
@@ -46,24 +48,27 @@ WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_TH
 
 @dataclass(frozen=True)
 class Job:
-    """One task of a batch: a scan, a seed, and where the outputs go."""
+    """One task of a batch: a scan, a seed, where the outputs go, the task's options.
+
+    ``options`` are keyword arguments of the task function (:mod:`asrbf_mesh.tasks`),
+    as ``(name, value)`` pairs, already validated.
+    """
 
     path: str
     task: str
     seed: int
     out_dir: str
-    extra: tuple[str, ...] = field(default=())
+    options: tuple[tuple[str, Any], ...] = field(default=())
 
     @property
     def record_path(self) -> Path:
         """The job's ``record.json``."""
         return Path(self.out_dir) / "record.json"
 
-    def argv(self) -> list[str]:
-        """Return the ``asrbf`` command line that does this job."""
-        out = str(Path(self.out_dir) / TASKS[self.task])
-        return [self.task, self.path, "-o", out, "--seed", str(self.seed), "--json",
-                *self.extra]
+    @property
+    def output(self) -> Path:
+        """The file or folder the task writes."""
+        return Path(self.out_dir) / TASKS[self.task]
 
 
 # --------------------------------------------------------------------------- planning
@@ -118,14 +123,27 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def plan_jobs(files: Sequence[Path], out_dir: Path, task: str, seeds: Sequence[int],
-              extra: Sequence[str] = ()) -> list[Job]:
+              options: Mapping[str, Any] | None = None) -> list[Job]:
     """One job per file and seed, each with its own output folder.
 
     A folder is named after the file's stem (``-s<seed>`` appended when several seeds
-    run); stems that collide take their parent folder's name in front.
+    run); stems that collide take their parent folder's name in front. ``options`` are
+    keyword arguments of the task function, checked here with
+    :func:`asrbf_mesh.tasks.check_options` (the batch sets the seed itself).
+
+    Raises
+    ------
+    ConfigError
+        An unknown task or a bad option: before any job runs.
     """
+    from . import tasks
+
     if task not in TASKS:
         raise ConfigError(f"task must be one of {', '.join(TASKS)}; got {task!r}")
+    options = dict(options or {})
+    if "seed" in options:
+        raise ConfigError("seed is set by the batch (seeds), not by the task options")
+    tasks.check_options(task, **options)
     stems: dict[str, list[Path]] = {}
     for f in files:
         stems.setdefault(f.stem, []).append(f)
@@ -138,7 +156,8 @@ def plan_jobs(files: Sequence[Path], out_dir: Path, task: str, seeds: Sequence[i
         raise AsrbfError(f"{out_dir}: several inputs would write to {twice[0]}/: rename them "
                          "or run them in separate batches")
     return [Job(str(f), task, s, str(out_dir / (names[f] if len(seeds) == 1
-                                              else f"{names[f]}-s{s}")), tuple(extra))
+                                              else f"{names[f]}-s{s}")),
+                tuple(options.items()))
             for f in files for s in seeds]
 
 
@@ -157,13 +176,13 @@ def run_job(job: Job) -> dict[str, Any]:
     """Run one job (on a worker) and return its record, also written to ``record.json``.
 
     Never raises for a bad input: the record's ``status`` is ``"error"`` and ``error``
-    the one-line message ``asrbf`` would print.
+    the one-line message ``asrbf`` would print. ``result`` is the dict the task returns
+    (what ``asrbf TASK --json`` prints).
     """
-    from . import cli
+    from . import tasks
 
     _pin_threads()
     t0 = time.perf_counter()
-    out, err = io.StringIO(), io.StringIO()
     try:
         worker = __import__("distributed").get_worker().address
     except (ImportError, ValueError):
@@ -175,15 +194,19 @@ def run_job(job: Job) -> dict[str, Any]:
                               "numba_threads": numba.get_num_threads()}
     try:
         Path(job.out_dir).mkdir(parents=True, exist_ok=True)
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            code = cli.main(job.argv())
-        lines = [ln for ln in err.getvalue().splitlines() if ln.startswith("asrbf: error: ")]
-        if code == 0:
-            record |= {"status": "ok", "error": None, "result": json.loads(out.getvalue()),
-                       "outputs": [str(Path(job.out_dir) / TASKS[job.task])]}
-        else:
-            msg = lines[-1][len("asrbf: error: "):] if lines else f"exit code {code}"
-            record |= {"status": "error", "error": msg, "result": None, "outputs": []}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a worker has no one to show them to
+            result = tasks.COMMANDS[job.task](job.path, job.output, seed=job.seed,
+                                              **dict(job.options))
+        record |= {"status": "ok", "error": None, "result": jsonable(result),
+                   "outputs": [str(job.output)]}
+    except AsrbfError as exc:
+        record |= {"status": "error", "error": tasks.error_line(exc), "result": None,
+                   "outputs": []}
+    except MemoryError:
+        record |= {"status": "error", "error": "out of memory (the input is too large for "
+                   "this machine; a fit needs about 120 bytes per point, see 'Memory of a "
+                   "fit' in BENCHMARKS.md)", "result": None, "outputs": []}
     except Exception as exc:  # a failure of one file must not stop the batch
         first = str(exc).splitlines()[0] if str(exc) else ""
         record |= {"status": "error", "error": f"{type(exc).__name__}: {first}",
@@ -191,7 +214,7 @@ def run_job(job: Job) -> dict[str, Any]:
     record["seconds"] = time.perf_counter() - t0
     try:
         with atomic_path(job.record_path) as tmp:
-            tmp.write_text(json.dumps(record, indent=1, default=str))
+            tmp.write_text(strict_json(record, indent=1))
     except (AsrbfError, OSError):
         pass  # the record still reaches the summary
     return record

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -75,14 +76,20 @@ def test_plan_jobs_names_folders_by_stem_seed_and_parent(tmp_path: Path) -> None
     c = tmp_path / "x" / "other.npy"
     jobs = plan_jobs([a, b, c], tmp_path / "out", "fit", [0])
     assert [Path(j.out_dir).name for j in jobs] == ["x_scan", "y_scan", "other"]
-    jobs = plan_jobs([c], tmp_path / "out", "lod", [1, 2], ["--levels", "2"])
+    jobs = plan_jobs([c], tmp_path / "out", "lod", [1, 2], {"levels": 2})
     assert [Path(j.out_dir).name for j in jobs] == ["other-s1", "other-s2"]
-    assert jobs[0].argv() == ["lod", str(c), "-o", str(tmp_path / "out" / "other-s1" / "lod"),
-                              "--seed", "1", "--json", "--levels", "2"]
+    assert jobs[0].output == tmp_path / "out" / "other-s1" / "lod"
+    assert (jobs[0].seed, jobs[0].options) == (1, (("levels", 2),))
     with pytest.raises(AsrbfError, match="several inputs would write to"):
         plan_jobs([tmp_path / "x" / "s.ply", tmp_path / "x" / "s.npy"], tmp_path, "fit", [0])
     with pytest.raises(ConfigError, match="task must be one of"):
         plan_jobs([a], tmp_path, "paint", [0])
+    with pytest.raises(ConfigError, match="levels must be an integer in"):
+        plan_jobs([a], tmp_path, "lod", [0], {"levels": 0})
+    with pytest.raises(ConfigError, match="no_such is not an option of lod"):
+        plan_jobs([a], tmp_path, "lod", [0], {"no_such": 3})
+    with pytest.raises(ConfigError, match="seed is set by the batch"):
+        plan_jobs([a], tmp_path, "fit", [0], {"seed": 3})
 
 
 def test_expand_inputs(scans: dict[str, Path]) -> None:
@@ -146,9 +153,9 @@ def test_batch_output_equals_the_single_command(client, scans, tmp_path) -> None
 
 
 @pytest.mark.parametrize(("task", "options", "key"), [
-    ("fill-holes", [], "holes_filled"),
-    ("lod", ["--levels", "2", "--no-metro"], "levels"),
-    ("compare", ["--som-iterations", "3000", "--no-meshes"], "som"),
+    ("fill-holes", {}, "holes_filled"),
+    ("lod", {"levels": 2, "metro": False}, "levels"),
+    ("compare", {"som_iterations": 3000, "meshes": False, "progress": False}, "som"),
 ])
 def test_every_task_runs(client, scans, tmp_path, task: str, options: list, key: str) -> None:
     jobs = plan_jobs([scans["grid"]], tmp_path, task, [0], options)
@@ -181,3 +188,37 @@ def test_cli_batch(scans, tmp_path) -> None:
                          timeout=300)
     assert bad.returncode == 2
     assert bad.stderr.strip() == "asrbf: error: seeds must look like 0, 0,3,5 or 0-7; got 'x'"
+
+
+@pytest.mark.parametrize(("task", "options", "message"), [
+    ("lod", "--no-such-option 3", "--task-options: unrecognized arguments: --no-such-option 3"),
+    ("lod", "--levels abc", "--task-options: argument --levels: invalid int value: 'abc'"),
+    ("lod", "--levels 0", "levels must be an integer in [1, 12], got 0"),
+    ("fit", "--seed 3", "unrecognized arguments: --seed 3"),
+    ("fit", "--chunk 8192", "chunk applies to a streamed fit only"),
+    ("compare", "--lod '", "--task-options: No closing quotation"),
+])
+def test_cli_batch_refuses_bad_task_options_at_once(scans, tmp_path, task: str, options: str,
+                                                    message: str) -> None:
+    """Bad --task-options: one line and exit 2 before any cluster starts (was: 15 s, then
+    "4 workers died")."""
+    t0 = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "asrbf_mesh.cli", "batch", str(scans["grid"]),
+                           "-o", str(tmp_path / "out"), "--task", task, "--task-options",
+                           options], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("asrbf: error: "), done.stderr
+    assert message in lines[0]
+    assert not (tmp_path / "out").exists()
+    assert time.perf_counter() - t0 < 30  # the interpreter's start; no job ran
+
+
+def test_task_options_become_task_keywords() -> None:
+    from asrbf_mesh.cli import task_options
+
+    assert task_options("lod", "--levels 3 --no-metro --compare-qem") == {
+        "levels": 3, "method": "resample", "compare_qem": True, "metro": False}
+    fit = task_options("fit", "--passes 2 --update gd")
+    assert fit["passes"] == 2 and fit["update"] == "gd" and fit["progress"] is False
+    assert task_options("compare", "")["meshes"] is True

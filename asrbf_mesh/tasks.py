@@ -1,0 +1,503 @@
+"""The task layer: one function per ``asrbf`` command, for scripts, the CLI and batches.
+
+Each function takes paths and keyword options (plain Python values; the defaults are
+the command line's), does the work, writes the outputs, and returns exactly the dict
+that ``asrbf <command> --json`` prints (strict JSON: no NaN). Bad options raise
+:class:`~asrbf_mesh.errors.ConfigError` naming the option, bad data
+:class:`~asrbf_mesh.errors.ScanError` / :class:`~asrbf_mesh.errors.NetworkFileError`.
+Folder outputs (``lod``, ``compare``, ``report``) appear whole or not at all.
+
+>>> from asrbf_mesh import tasks                                   # doctest: +SKIP
+>>> tasks.fit("scan.ply", "scan.asrbf", seed=3)["n_neurons"]       # doctest: +SKIP
+727
+
+pymeshlab and matplotlib are imported only by the tasks that need them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import os
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from ._atomic import atomic_dir, atomic_path, check_output_dir, check_output_path
+from ._config import FitConfig
+from ._frame import VIEW_AXES
+from ._holes import BLENDS
+from ._io import load_scan, save_mesh
+from ._lod import METHODS as LOD_METHODS
+from ._network import FORMAT_VERSION, Network
+from ._surface import FOOTPRINT_MODES
+from ._validate import check_choice, check_float, check_int, check_seed, jsonable
+from .errors import AsrbfError, ConfigError
+
+__all__ = ["COMMANDS", "check_options", "compare", "fill_holes", "filter_script", "fit",
+           "info", "lod", "metro", "reconstruct", "report"]
+
+#: Most levels ``lod`` accepts before looking at the scan (level 12 is 2048 times coarser).
+MAX_LEVELS = 12
+#: Fewest grid samples along the shorter side of the coarsest LOD level.
+MIN_LEVEL_SAMPLES = 8
+#: Files each folder command writes: an existing folder holding only these is replaced.
+LOD_FILES = ("manifest.json", "level_*.ply", "level_*.asrbf", "network.asrbf", "qem_*.ply")
+COMPARE_FILES = ("compare.json", "report.md", "report.html", "img", "lod", "asrbf_bpa.ply",
+                 "som_bpa.ply")
+REPORT_FILES = ("summary.json", "summary.md", "summary.html")
+_LEARNING_FIELDS = tuple(f.name for f in dataclasses.fields(FitConfig))
+
+
+def _check_bool(value: Any, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{name} must be True or False, got {value!r}")
+    return value
+
+
+def _progress(value: Any) -> bool | None:
+    if value is not None:
+        _check_bool(value, "progress")
+    return value
+
+
+# --------------------------------------------------------------------------- fit
+
+
+def _fit_summary(net: Network) -> dict[str, Any]:
+    info = net.info
+    n = int(info["n_points"])
+    return {
+        "n_points": n,
+        "n_neurons": net.n_neurons,
+        "ebar": info["ebar"],
+        "ebar_sequential": info["ebar_sequential"],
+        "n_to_k": net.compression_ratio(n),
+        "storage_ratio": net.storage_ratio(n),
+        "error_mean": info["error_mean"],
+        "error_std": info["error_std"],
+        "steps": info["steps"],
+        "fit_seconds": info["fit_seconds"],
+        "learn_seconds": info["learn_seconds"],
+        "polish_seconds": info["polish_seconds"],
+        "us_per_step": info["us_per_step"],
+        "d_min": info["d_min"],
+        "seed": info["seed"],
+        "polish": net.config.polish,
+        "added": net.log.added if net.log else None,
+        "pruned": net.log.pruned if net.log else None,
+    }
+
+
+def _check_fit(*, seed: int, view_axis: str, float32: bool, stream: bool, chunk: int | None,
+               mix: int | None, progress: bool | None, learning: dict[str, Any]) -> FitConfig:
+    unknown = sorted(set(learning) - set(_LEARNING_FIELDS))
+    if unknown:
+        raise ConfigError(f"{unknown[0]} is not a learning option (one of "
+                          f"{', '.join(_LEARNING_FIELDS)})")
+    cfg = FitConfig().replace(**{k: v for k, v in learning.items() if v is not None})
+    check_seed(seed)
+    check_choice(view_axis, "view_axis", VIEW_AXES)
+    _check_bool(float32, "float32")
+    _check_bool(stream, "stream")
+    _progress(progress)
+    for name, value in (("chunk", chunk), ("mix", mix)):
+        if value is None:
+            continue
+        if not stream:
+            raise ConfigError(f"{name} applies to a streamed fit only (--stream); without it "
+                              "the scan is loaded whole")
+        check_int(value, name, 1)
+    return cfg
+
+
+def fit(scan: str | os.PathLike, output: str | os.PathLike, *, seed: int = 0,
+        view_axis: str = "z", float32: bool = False, stream: bool = False,
+        chunk: int | None = None, mix: int | None = None, progress: bool | None = None,
+        **learning: Any) -> dict[str, Any]:
+    """``asrbf fit``: fit a network to a scan file and save it (``.asrbf``).
+
+    ``learning``: :class:`~asrbf_mesh.FitConfig` fields (``error_threshold``, ``d_min``,
+    ``passes``, ``update`` ...); None keeps the default. ``chunk`` (65,536 points) and
+    ``mix`` (16 blocks) apply with ``stream=True`` only.
+    """
+    cfg = _check_fit(seed=seed, view_axis=view_axis, float32=float32, stream=stream,
+                     chunk=chunk, mix=mix, progress=progress, learning=learning)
+    out = Path(output)
+    if out.suffix.lower() != ".asrbf":
+        raise AsrbfError(f"{out}: a network file must end in .asrbf")
+    if stream:
+        from ._stream import DEFAULT_CHUNK, DEFAULT_MIX, fit_stream, open_points
+
+        chunk = DEFAULT_CHUNK if chunk is None else chunk
+        mix = DEFAULT_MIX if mix is None else mix
+        open_points(scan, chunk)  # the input's errors first
+    else:
+        data = load_scan(scan)
+    check_output_path(out, scan)  # before the fit, not after it
+    if stream:
+        net = fit_stream(scan, cfg, seed=seed, view_axis=view_axis, chunk=chunk, mix=mix,
+                         progress=progress)
+    else:
+        from ._learn import fit as fit_scan
+
+        net = fit_scan(data, cfg, seed=seed, view_axis=view_axis, progress=progress)
+    net.save(out, float32=float32, inputs=(scan,))
+    return jsonable(_fit_summary(net) | {"output": str(out)})
+
+
+# --------------------------------------------------------------------------- info
+
+
+def info(network: str | os.PathLike) -> dict[str, Any]:
+    """``asrbf info``: describe a network file."""
+    net = Network.load(network)
+    return jsonable({"n_neurons": net.n_neurons, "format_version": FORMAT_VERSION,
+                     "config": net.config.to_dict(), "frame": net.frame.to_dict(),
+                     "stats": net.stats().__dict__, "info": net.info,
+                     "log": net.log.counters() if net.log else None})
+
+
+# --------------------------------------------------------------------------- reconstruct
+
+
+def _check_reconstruct(*, resolution: int | None, spacing: float | None, mode: str | None,
+                       margin: float, footprint: Any) -> None:
+    if resolution is not None and spacing is not None:
+        raise ConfigError("give either resolution or spacing, not both")
+    if resolution is not None:
+        check_int(resolution, "resolution", 2)
+    if spacing is not None:
+        check_float(spacing, "spacing", low=0.0, low_open=True)
+    if mode is not None:
+        check_choice(mode, "mode", FOOTPRINT_MODES)
+    check_float(margin, "margin", low=0.0, high=10.0, high_open=True)
+    used = mode or ("full" if footprint is None else "scan")
+    if margin != 0 and used != "full":
+        why = "" if mode else " (a footprint meshes mode scan unless mode is given)"
+        raise ConfigError(f"margin applies to mode full only: mode {used} follows the scan's "
+                          f"border{why}")
+
+
+def reconstruct(network: str | os.PathLike, output: str | os.PathLike, *,
+                resolution: int | None = None, spacing: float | None = None,
+                footprint: str | os.PathLike | None = None, mode: str | None = None,
+                margin: float = 0.0) -> dict[str, Any]:
+    """``asrbf reconstruct``: mesh a network's surface on a grid (``spacing`` in scan units)."""
+    from ._surface import reconstruct as mesh_network
+
+    _check_reconstruct(resolution=resolution, spacing=spacing, mode=mode, margin=margin,
+                       footprint=footprint)
+    net = Network.load(network)
+    fp = load_scan(footprint) if footprint else None
+    try:
+        mesh = mesh_network(net, resolution=resolution, spacing_abs=spacing, footprint=fp,
+                            mode=mode, margin_rel=margin)
+    except AsrbfError as exc:  # the library's argument names to the command's
+        text = str(exc).replace("spacing_abs", "spacing").replace("margin_rel", "margin")
+        raise type(exc)(text) from None
+    save_mesh(mesh, output, overwrite_inputs=(network, footprint))
+    return jsonable({"output": str(output), "vertices": mesh.n_vertices,
+                     "faces": mesh.n_faces})
+
+
+# --------------------------------------------------------------------------- fill-holes
+
+
+def _check_fill_holes(*, network: Any, max_hole_size: Any, blend: str, lowpass_rel: float,
+                      seed: int, progress: bool | None) -> None:
+    check_choice(blend, "blend", BLENDS)
+    check_float(lowpass_rel, "lowpass_rel")
+    check_seed(seed)
+    _progress(progress)
+
+
+def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
+               network: str | os.PathLike | None = None, max_hole_size: str | float | None = None,
+               blend: str = "thin-plate", lowpass_rel: float = 1.0, seed: int = 0,
+               progress: bool | None = None) -> dict[str, Any]:
+    """``asrbf fill-holes``: fill a scan's holes from its network (fitted if not given).
+
+    ``lowpass_rel=0`` keeps every neuron over a hole.
+    """
+    from ._holes import fill_holes as fill
+
+    _check_fill_holes(network=network, max_hole_size=max_hole_size, blend=blend,
+                      lowpass_rel=lowpass_rel, seed=seed, progress=progress)
+    data = load_scan(scan)
+    out = check_output_path(output, scan, network)
+    net = Network.load(network) if network else None
+    res = fill(data, net, max_hole_size=max_hole_size, blend=blend,
+               lowpass_rel=None if lowpass_rel <= 0 else lowpass_rel, seed=seed,
+               progress=progress)
+    save_mesh(res.mesh, out, overwrite_inputs=(scan, network))
+    return jsonable(res.to_dict() | {"output": str(out)})
+
+
+# --------------------------------------------------------------------------- lod
+
+
+def _check_lod(*, levels: int, method: str, compare_qem: bool, metro: bool,
+               seed: int) -> None:
+    check_int(levels, "levels", 1, MAX_LEVELS)
+    check_choice(method, "method", LOD_METHODS)
+    _check_bool(compare_qem, "compare_qem")
+    _check_bool(metro, "metro")
+    check_seed(seed)
+
+
+def _check_levels_fit(points: Any, levels: int, method: str) -> None:
+    """Refuse a level count whose coarsest grid has < MIN_LEVEL_SAMPLES along the short side.
+
+    Level ``i`` samples the scan at ``s0 * 2**i`` (``s0``: the scan's spacing, or for
+    ``refit`` max(D_min / 4, the spacing)), the rule of :func:`~asrbf_mesh._lod.lod_set`.
+    A scan this cannot be measured on is left to ``lod_set``'s own errors.
+    """
+    import numpy as np
+
+    from ._frame import to_height_field
+    from ._learn import auto_d_min
+
+    try:
+        hf = to_height_field(points, warn_fraction=1.0)  # warnings come from the fit
+    except AsrbfError:
+        return
+    scale = hf.frame.scale[:2]
+    gmean = float(np.sqrt(scale[0] * scale[1]))
+    s0 = hf.spacing * gmean
+    if method == "refit":
+        cfg = FitConfig()
+        s0 = max(auto_d_min(hf.spacing, cfg.error_threshold) / 4.0 * gmean, s0)
+    short = float(scale.min())
+    if not (s0 > 0 and np.isfinite(s0)):
+        return
+    usable = 1
+    while usable < levels and round(short / (s0 * 2.0**usable)) + 1 >= MIN_LEVEL_SAMPLES:
+        usable += 1
+    if levels > usable:
+        n = int(round(short / (s0 * 2.0 ** (levels - 1)))) + 1
+        raise ConfigError(f"levels must be at most {usable} for this scan: level {levels - 1} "
+                          f"would sample its shorter side at {n} points (a useful mesh needs "
+                          f"{MIN_LEVEL_SAMPLES}), got {levels}")
+
+
+def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
+        method: str = "resample", compare_qem: bool = False, metro: bool = True,
+        seed: int = 0) -> dict[str, Any]:
+    """``asrbf lod``: write a level-of-detail set and its manifest into the folder ``output``.
+
+    Returns the manifest. ``metro=False`` skips the Metro error measures.
+    """
+    from ._lod import lod_set
+    from .evaluate import write_lod_set
+
+    _check_lod(levels=levels, method=method, compare_qem=compare_qem, metro=metro, seed=seed)
+    data = load_scan(scan)
+    out = check_output_dir(output)
+    _check_levels_fit(data.points, levels, method)
+    with atomic_dir(out, LOD_FILES) as tmp:
+        lods = lod_set(data, levels=levels, method=method, seed=seed)
+        manifest = write_lod_set(data, lods, tmp, compare_qem=compare_qem, metro=metro)
+    return jsonable(manifest)
+
+
+# --------------------------------------------------------------------------- metro
+
+
+def metro(mesh: str | os.PathLike, reference: str | os.PathLike, *, samples: int | None = None,
+          seed: int = 0, error_mesh: str | os.PathLike | None = None,
+          samples_out: str | os.PathLike | None = None) -> dict[str, Any]:
+    """``asrbf metro``: Metro distances between a mesh and a reference scan.
+
+    ``error_mesh``: also write the mesh with its per-vertex error as quality;
+    ``samples_out``: every sample and its distance (``.npz``).
+    """
+    import numpy as np
+
+    from .evaluate._metro import metro as measure
+
+    check_seed(seed)
+    a, b = load_scan(mesh), load_scan(reference)
+    outs = [x for x in (error_mesh, samples_out) if x]
+    for x in outs:
+        check_output_path(x, mesh, reference)
+    if samples_out and not str(samples_out).lower().endswith(".npz"):
+        raise AsrbfError(f"{samples_out}: the samples file must end in .npz")
+    if error_mesh and b.faces is None:
+        raise AsrbfError(f"{reference}: a point cloud without faces; --error-mesh needs "
+                         "a mesh reference (point distances measure the cloud's gaps)")
+    res = measure(a, b if b.faces is not None else b.points, samples=samples, seed=seed,
+                  per_sample=bool(outs))
+    if error_mesh:
+        save_mesh(res.error_mesh(), error_mesh, overwrite_inputs=(mesh, reference))
+    if samples_out:
+        arrays = {f"{name}_{k}": getattr(d, k) for name, d in
+                  (("a_to_b", res.a_to_b), ("b_to_a", res.b_to_a)) if d is not None
+                  for k in ("points", "distances")}
+        with atomic_path(samples_out) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+    return jsonable(res.to_dict() | {"mesh": str(mesh), "reference": str(reference)})
+
+
+# --------------------------------------------------------------------------- compare
+
+
+def _check_compare(*, network: Any, holes: bool, lod: bool, meshes: bool,
+                   som_iterations: int | None, seed: int, progress: bool | None) -> None:
+    for name, value in (("holes", holes), ("lod", lod), ("meshes", meshes)):
+        _check_bool(value, name)
+    if som_iterations is not None:
+        check_int(som_iterations, "som_iterations", 1)
+    check_seed(seed)
+    _progress(progress)
+
+
+def compare(scan: str | os.PathLike, output: str | os.PathLike, *,
+            network: str | os.PathLike | None = None, holes: bool = False, lod: bool = False,
+            meshes: bool = True, som_iterations: int | None = None, seed: int = 0,
+            progress: bool | None = None) -> dict[str, Any]:
+    """``asrbf compare``: our reconstruction vs the SOM baseline, report in folder ``output``."""
+    from .evaluate._report import compare as run_compare
+    from .evaluate._report import write_compare
+
+    _check_compare(network=network, holes=holes, lod=lod, meshes=meshes,
+                   som_iterations=som_iterations, seed=seed, progress=progress)
+    data = load_scan(scan)
+    out = check_output_dir(output)
+    net = Network.load(network) if network else None
+    with atomic_dir(out, COMPARE_FILES) as tmp:
+        c = run_compare(data, net=net, seed=seed, holes=holes, lod=lod, lod_dir=tmp / "lod",
+                        som_iterations=som_iterations, progress=progress)
+        paths = write_compare(c, tmp, meshes=meshes)
+    files = {k: str(out / Path(v).relative_to(tmp)) for k, v in paths.items()}
+    return jsonable(c.to_dict() | {"files": files})
+
+
+# --------------------------------------------------------------------------- report
+
+
+def _unique_inputs(inputs: Sequence[str | os.PathLike]) -> list[str | os.PathLike]:
+    """Return the inputs without those naming a compare.json given before (one warning)."""
+    seen: dict[Path, str | os.PathLike] = {}
+    dropped = []
+    for p in inputs:
+        path = Path(p)
+        key = (path / "compare.json" if path.is_dir() else path).resolve()
+        if key in seen:
+            dropped.append(f"{p} (same as {seen[key]})")
+        else:
+            seen[key] = p
+    if dropped:
+        warnings.warn(f"report: counted once: {', '.join(dropped)}", stacklevel=3)
+    return list(seen.values())
+
+
+def report(inputs: Sequence[str | os.PathLike], output: str | os.PathLike) -> dict[str, Any]:
+    """``asrbf report``: one page over several ``asrbf compare`` results, in folder ``output``.
+
+    Inputs naming the same ``compare.json`` count once. Returns ``summary.json``.
+    """
+    import json
+
+    from .evaluate._report import load_compare, write_summary
+
+    if isinstance(inputs, (str, os.PathLike)):
+        raise ConfigError("inputs must be a list of compare folders or compare.json files")
+    inputs = _unique_inputs(inputs)
+    results = [load_compare(p) for p in inputs]
+    out = check_output_dir(output)
+    links = []
+    for p in inputs:
+        page = (Path(p) if Path(p).is_dir() else Path(p).parent) / "report.html"
+        links.append(os.path.relpath(page, out) if page.exists() else None)
+    with atomic_dir(out, REPORT_FILES) as tmp:
+        paths = write_summary(results, tmp, links)
+        summary = json.loads(paths["json"].read_text(encoding="utf-8"))
+    return jsonable(summary)
+
+
+# --------------------------------------------------------------------------- filter-script
+
+
+def filter_script(script: str | os.PathLike, input: str | os.PathLike,  # noqa: A002
+                  output: str | os.PathLike) -> dict[str, Any]:
+    """``asrbf filter-script``: run a JSON list of pymeshlab and asrbf filters on a mesh."""
+    from meshlab_filter import run_script_file
+
+    return jsonable(run_script_file(script, input, output))
+
+
+# --------------------------------------------------------------------------- demo
+
+
+def demo(output: str | os.PathLike = "asrbf-demo", *, seed: int = 0,
+         progress: bool | None = None) -> dict[str, Any]:
+    """``asrbf demo``: fit the face range map shipped with pymeshlab, mesh it two ways.
+
+    Returns the fit summary and the written files with their sizes.
+    """
+    from ._io import face_map_path
+    from ._learn import fit as fit_scan
+    from ._surface import reconstruct as mesh_network
+
+    check_seed(seed)
+    _progress(progress)
+    out = Path(output)
+    out.mkdir(parents=True, exist_ok=True)
+    scan = load_scan(face_map_path())
+    net = fit_scan(scan, seed=seed, progress=progress)
+    net_path = net.save(out / "face.asrbf")
+    fp = mesh_network(net, footprint=scan)
+    full = mesh_network(net)
+    p1 = save_mesh(fp, out / "face_footprint.ply")
+    p2 = save_mesh(full, out / "face_full.ply")
+    return jsonable(_fit_summary(net) | {
+        "network": str(net_path), "network_bytes": net_path.stat().st_size,
+        "footprint_mesh": str(p1), "footprint_vertices": fp.n_vertices,
+        "full_mesh": str(p2), "full_vertices": full.n_vertices})
+
+
+# --------------------------------------------------------------------------- registry
+
+#: Command name -> task function.
+COMMANDS: dict[str, Callable[..., dict[str, Any]]] = {
+    "fit": fit, "info": info, "reconstruct": reconstruct, "fill-holes": fill_holes,
+    "lod": lod, "metro": metro, "compare": compare, "report": report,
+    "filter-script": filter_script, "demo": demo}
+
+_CHECKS: dict[str, Callable[..., Any]] = {
+    "fill-holes": _check_fill_holes, "lod": _check_lod, "compare": _check_compare}
+
+
+def check_options(command: str, **options: Any) -> dict[str, Any]:
+    """Validate the keyword options of ``command``'s task without running it.
+
+    What needs no data is checked: names, types, ranges, combinations. Returns the
+    options; raises :class:`ConfigError` naming the first bad one.
+    """
+    if command not in COMMANDS:
+        raise ConfigError(f"command must be one of {', '.join(COMMANDS)}; got {command!r}")
+    params = inspect.signature(COMMANDS[command]).parameters
+    keywords = {k: p.default for k, p in params.items() if p.kind is p.KEYWORD_ONLY}
+    takes_any = any(p.kind is p.VAR_KEYWORD for p in params.values())
+    for k in options:
+        if k not in keywords and not takes_any:
+            raise ConfigError(f"{k} is not an option of {command}")
+    values = keywords | options
+    if command == "fit":
+        learning = {k: v for k, v in values.items() if k not in keywords}
+        _check_fit(**{k: values[k] for k in keywords}, learning=learning)
+    elif command in _CHECKS:
+        _CHECKS[command](**values)
+    elif command == "reconstruct":
+        _check_reconstruct(**values)
+    elif "seed" in values:
+        check_seed(values["seed"])
+    return options
+
+
+def error_line(exc: BaseException) -> str:
+    """Return the one line ``asrbf`` prints for an error of a task."""
+    text = str(exc)
+    return text.splitlines()[0] if text else ""
