@@ -221,8 +221,6 @@ def test_no_import_cycle_at_module_level() -> None:
     assert _cycles(include_functions=False) == []
 
 
-@pytest.mark.xfail(strict=True, reason="asrbf_mesh._batch imports asrbf_mesh.cli in a function "
-                   "and cli imports _batch in one: the batch should call the task layer")
 def test_no_import_cycle_at_all() -> None:
     assert _cycles(include_functions=True) == []
 
