@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import sys
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator
@@ -34,15 +33,17 @@ from typing import Any
 import numpy as np
 
 from . import _learn_kernels as _lk
+from . import _validate
+from ._validate import check_points, check_seed
 from ._config import FitConfig
 from ._frame import HeightField, to_height_field
 from ._io import Scan
-from ._network import FitLog, Network
+from ._network import FitInfo, FitLog, Network
 from ._version import __version__
 from .errors import FitError, ScanError
 
-__all__ = ["fit", "learn", "learn_from", "auto_d_min", "residuals", "MIN_POINTS", "LearnedState",
-           "NeuronCapWarning"]
+__all__ = ["fit", "learn", "learn_from", "auto_d_min", "residuals", "fit_info", "MIN_POINTS",
+           "LearnedState", "NeuronCapWarning"]
 
 
 class NeuronCapWarning(UserWarning):
@@ -208,30 +209,6 @@ class LearnedState:
     seconds: float
 
 
-def _progress(total: int, enabled: bool | None) -> Callable[[int], None] | None:
-    """Return a tick function driving a tqdm bar shown after the first second of work."""
-    if enabled is False or (enabled is None and not sys.stderr.isatty()):
-        return None
-    from tqdm import tqdm
-
-    bar: Any = None
-    t0 = time.perf_counter()
-    done = 0
-
-    def update(n: int) -> None:
-        nonlocal bar, done
-        done += n
-        if bar is None and time.perf_counter() - t0 > 1.0 and done < total:
-            bar = tqdm(total=total, initial=done, unit="step", unit_scale=True,
-                       desc="learning", leave=False, file=sys.stderr)
-        elif bar is not None:
-            bar.update(n)
-        if bar is not None and done >= total:
-            bar.close()
-
-    return update
-
-
 def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
           progress: bool | None = None,
           order: Callable[[np.random.Generator], np.ndarray] | None = None) -> LearnedState:
@@ -269,6 +246,7 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     A flat scan (every residual within E of the bias) gives a network with no
     neuron, only the bias a0: a valid result.
     """
+    seed = check_seed(seed)
     cfg = config or FitConfig()
     n = hf.n_points
     if n < MIN_POINTS:
@@ -316,7 +294,7 @@ def learn_from(batches: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], n: 
     window = cfg.window
     prune_window = cfg.prune_window or cfg.window
     state = _State(cfg, d_min, n, total, window, prune_window)
-    tick = _progress(total, progress)
+    tick = _validate.progress(total, progress, "learning", unit="step")
     t0 = time.perf_counter()
     for X, Z, order in batches:
         for start in range(0, len(order), _CHUNK):
@@ -347,6 +325,25 @@ def learn_from(batches: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], n: 
 def source_hash(points: np.ndarray) -> str:
     """SHA-256 of the point coordinates (provenance of a network)."""
     return hashlib.sha256(np.ascontiguousarray(points, dtype=np.float64).tobytes()).hexdigest()
+
+
+def fit_info(n_points: int, net: Network, source: str | None, sha256: str, seed: int,
+             spacing: float, learned: LearnedState, polished: Any, ebar: float,
+             error_mean: float, error_std: float, polish_seconds: float, fit_seconds: float,
+             **stream: Any) -> FitInfo:
+    """Build the :class:`FitInfo` of a fit, in memory or streamed (``stream``: its fields).
+
+    ``polished`` is the polish's result (its ``ebar_before`` is E-bar before the polish)
+    or None.
+    """
+    return FitInfo(
+        n_points=n_points, n_neurons=net.n_neurons, source=source, source_sha256=sha256,
+        seed=seed, spacing=spacing, d_min=learned.d_min, steps=learned.steps, ebar=ebar,
+        ebar_sequential=polished.ebar_before if polished is not None else ebar,
+        error_mean=error_mean, error_std=error_std, learn_seconds=learned.seconds,
+        polish_seconds=polish_seconds, fit_seconds=fit_seconds,
+        us_per_step=1e6 * learned.seconds / max(learned.steps, 1), version=__version__,
+        **stream)
 
 
 def residuals(net: Network, hf: HeightField) -> np.ndarray:
@@ -403,13 +400,12 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     """
     from ._polish import polish_full, polish_weights
 
+    seed = check_seed(seed)
     cfg = (config or FitConfig()).replace(**overrides) if overrides else (config or FitConfig())
     if isinstance(scan, Scan):
         points, source = scan.points, scan.source
     else:
-        points, source = np.asarray(scan, dtype=np.float64), None
-        if points.ndim != 2 or points.shape[1] != 3:
-            raise ScanError(f"points must have shape (N, 3), got {points.shape}")
+        points, source = check_points(scan, "points"), None
     named = f"{source}: " if source else ""
     if len(points) < MIN_POINTS:
         raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points, got {len(points)}")
@@ -438,23 +434,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     res = residuals(net, hf)
     abs_mm = np.abs(res) * hf.frame.scale[2]
     fit_seconds = time.perf_counter() - t0
-    info: dict[str, Any] = {
-        "n_points": hf.n_points,
-        "n_neurons": net.n_neurons,
-        "source": source,
-        "source_sha256": source_hash(points),
-        "seed": int(seed),
-        "spacing": hf.spacing,
-        "d_min": learned.d_min,
-        "steps": learned.steps,
-        "ebar": float(np.mean(np.abs(res))),
-        "ebar_sequential": pr.ebar_before if pr is not None else float(np.mean(np.abs(res))),
-        "error_mean": float(abs_mm.mean()),
-        "error_std": float(abs_mm.std()),
-        "learn_seconds": learned.seconds,
-        "polish_seconds": polish_seconds,
-        "fit_seconds": fit_seconds,
-        "us_per_step": 1e6 * learned.seconds / max(learned.steps, 1),
-        "version": __version__,
-    }
-    return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info)
+    info = fit_info(hf.n_points, net, source, source_hash(points), int(seed), hf.spacing,
+                    learned, pr, float(np.mean(np.abs(res))), float(abs_mm.mean()),
+                    float(abs_mm.std()), polish_seconds, fit_seconds)
+    return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info.to_dict())

@@ -11,7 +11,7 @@ import io
 import json
 import os
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -21,10 +21,10 @@ from . import _network_kernels as _nk
 from ._atomic import atomic_path, check_output_path
 from ._config import FitConfig
 from ._frame import Frame
-from ._io import _one_line
-from .errors import AsrbfError, NetworkFileError
+from ._validate import one_line
+from .errors import AsrbfError, ConfigError, NetworkFileError
 
-__all__ = ["Network", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
+__all__ = ["Network", "FitInfo", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
 
 FORMAT_NAME = "asrbf-network"
 FORMAT_VERSION = 1
@@ -103,6 +103,101 @@ class FitLog:
         """Return the scalar counters as a dict."""
         return {"added": self.added, "pruned": self.pruned, "reset": self.reset,
                 "diverged": self.diverged, "capped": self.capped}
+
+
+@dataclass(frozen=True)
+class FitInfo:
+    """The figures of a fit (:func:`asrbf_mesh.fit`, :func:`asrbf_mesh.fit_stream`), typed.
+
+    ``Network.info`` keeps them as the plain dict the ``.asrbf`` file stores
+    (:meth:`to_dict`); ``Network.fit_info`` gives them back as this record.
+
+    Parameters
+    ----------
+    n_points, n_neurons : int
+        N points learned from and K neurons of the network.
+    source : str or None
+        The scan file (None for points given in memory).
+    source_sha256 : str
+        SHA-256 of the point coordinates (float64).
+    seed : int
+        Seed of the replay order.
+    spacing : float
+        Sampling spacing, unit square.
+    d_min : float
+        D_min used, unit square.
+    steps : int
+        Learning steps (observations replayed).
+    ebar : float
+        Mean |f - z| in the unit cube after the polish.
+    ebar_sequential : float
+        The same before the polish (equal to ``ebar`` without a polish).
+    error_mean, error_std : float
+        Mean and standard deviation of |depth error|, scan units.
+    learn_seconds, polish_seconds, fit_seconds, us_per_step : float or None
+        Wall-clock figures; None for a network read from a file (they are not stored,
+        so that the same seed gives the same file).
+    version : str
+        asrbf-mesh version that fitted the network.
+    streamed : bool
+        Fitted by :func:`asrbf_mesh.fit_stream`.
+    chunk, mix : int or None
+        The streaming fit's block size and group size.
+    spacing_exact : bool or None
+        Streaming fit: False when the spacing came from a sample of tiles.
+    """
+
+    n_points: int
+    n_neurons: int
+    source: str | None
+    source_sha256: str
+    seed: int
+    spacing: float
+    d_min: float
+    steps: int
+    ebar: float
+    ebar_sequential: float
+    error_mean: float
+    error_std: float
+    learn_seconds: float | None = None
+    polish_seconds: float | None = None
+    fit_seconds: float | None = None
+    us_per_step: float | None = None
+    version: str = ""
+    streamed: bool = False
+    chunk: int | None = None
+    mix: int | None = None
+    spacing_exact: bool | None = None
+
+    _STREAM = ("streamed", "chunk", "mix", "spacing_exact")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the ``Network.info`` dict: timings when known, stream fields if streamed."""
+        out = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in self._STREAM and not self.streamed:
+                continue
+            if f.name in VOLATILE_INFO and v is None:
+                continue
+            out[f.name] = v
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> FitInfo:
+        """Inverse of :meth:`to_dict` (other keys are ignored).
+
+        Raises
+        ------
+        ConfigError
+            A fit figure is missing.
+        """
+        names = [f.name for f in fields(cls)]
+        required = [f.name for f in fields(cls) if f.default is MISSING]
+        missing = [n for n in required if n not in data]
+        if missing:
+            raise ConfigError(f"fit info lacks {', '.join(missing)}")
+        return cls(**{n: data[n] for n in names if n in data})
 
 
 @dataclass(frozen=True)
@@ -198,6 +293,14 @@ class Network:
     def n_neurons(self) -> int:
         """K, the number of Gaussian neurons."""
         return int(len(self.widths))
+
+    @property
+    def fit_info(self) -> FitInfo | None:
+        """The fit figures of ``info`` as a :class:`FitInfo`; None without fit figures."""
+        try:
+            return FitInfo.from_dict(self.info)
+        except (ConfigError, TypeError):
+            return None
 
     def compression_ratio(self, n_points: int | None = None) -> float:
         """N : K, points per neuron (paper, Table 2)."""
@@ -387,9 +490,9 @@ class Network:
                 ) from None
             raise NetworkFileError(f"{p}: not an asrbf network file (not a zip archive)") from None
         except OSError as exc:
-            raise NetworkFileError(f"{p}: cannot read ({exc.strerror or _one_line(exc)})") from None
+            raise NetworkFileError(f"{p}: cannot read ({exc.strerror or one_line(exc)})") from None
         except Exception as exc:  # corrupt member, truncated data, ...
-            raise NetworkFileError(f"{p}: corrupt network file ({_one_line(exc)})") from None
+            raise NetworkFileError(f"{p}: corrupt network file ({one_line(exc)})") from None
         try:
             meta = json.loads(bytes(arrays["meta"]).decode())
         except Exception:
@@ -414,4 +517,4 @@ class Network:
                        arrays["weights"], Frame.from_dict(meta["frame"]),
                        FitConfig.from_dict(meta["config"]), log, dict(meta.get("info") or {}))
         except (KeyError, ValueError, TypeError, AsrbfError) as exc:
-            raise NetworkFileError(f"{p}: corrupt network file ({_one_line(exc)})") from None
+            raise NetworkFileError(f"{p}: corrupt network file ({one_line(exc)})") from None
