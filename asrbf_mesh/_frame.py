@@ -16,7 +16,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._io import _collinear_xy
-from .errors import ScanError
+from .errors import ConfigError, ScanError
 
 __all__ = ["Frame", "HeightField", "HeightFieldWarning", "DuplicatePointsWarning",
            "to_height_field", "fold_fraction", "duplicate_fraction", "sampling_spacing",
@@ -69,11 +69,11 @@ class Frame:
         for name, shape in (("rotation", (3, 3)), ("offset", (3,)), ("scale", (3,))):
             arr = np.array(getattr(self, name), dtype=np.float64)
             if arr.shape != shape or not np.all(np.isfinite(arr)):
-                raise ValueError(f"Frame.{name} must be a finite array of shape {shape}")
+                raise ConfigError(f"Frame.{name} must be a finite array of shape {shape}")
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
         if np.any(self.scale <= 0):
-            raise ValueError("Frame.scale must be positive")
+            raise ConfigError("Frame.scale must be positive")
 
     def to_unit(self, world: np.ndarray) -> np.ndarray:
         """World (N, 3) points to unit-cube coordinates (N, 3)."""

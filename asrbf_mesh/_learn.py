@@ -34,11 +34,11 @@ import numpy as np
 
 from . import _learn_kernels as _lk
 from . import _validate
-from ._validate import check_points, check_seed
 from ._config import FitConfig
 from ._frame import HeightField, to_height_field
 from ._io import Scan
 from ._network import FitInfo, FitLog, Network
+from ._validate import check_points, check_seed
 from ._version import __version__
 from .errors import FitError, ScanError
 

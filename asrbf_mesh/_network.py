@@ -21,8 +21,8 @@ from . import _network_kernels as _nk
 from ._atomic import atomic_path, check_output_path
 from ._config import FitConfig
 from ._frame import Frame
-from ._validate import one_line
-from .errors import AsrbfError, ConfigError, NetworkFileError
+from ._validate import check_float, check_int, one_line
+from .errors import AsrbfError, ConfigError, NetworkFileError, ScanError
 
 __all__ = ["Network", "FitInfo", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
 
@@ -202,7 +202,11 @@ class FitInfo:
 
 @dataclass(frozen=True)
 class NeuronStats:
-    """Width and weight statistics of a network (the paper's Table 1), unit cube."""
+    """Width and |weight| statistics of a network (the paper's Table 1), unit cube.
+
+    A network without neurons (K = 0, a flat scan: only the bias a0) has every
+    statistic 0.0: no width and no weight, rather than NaN (which JSON cannot hold).
+    """
 
     n_neurons: int
     width_max: float
@@ -213,6 +217,13 @@ class NeuronStats:
     weight_min: float
     weight_mean: float
     weight_std: float
+
+    def __post_init__(self) -> None:
+        check_int(self.n_neurons, "n_neurons", 0)
+        for f in fields(self)[1:]:
+            object.__setattr__(self, f.name, check_float(getattr(self, f.name), f.name,
+                                                         low=0.0 if f.name.startswith("width")
+                                                         else None))
 
 
 @dataclass(frozen=True, eq=False)
@@ -259,25 +270,37 @@ class Network:
     info: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        c = np.array(self.centers, dtype=np.float64)
+        try:
+            c = np.array(self.centers, dtype=np.float64)
+            w = np.array(self.widths, dtype=np.float64).reshape(-1)
+            a = np.array(self.weights, dtype=np.float64).reshape(-1)
+            a0 = float(self.a0)
+        except (TypeError, ValueError):
+            raise ConfigError("a0, centers, widths and weights must be numbers") from None
         if c.size == 0:
             c = c.reshape(0, 2)
         if c.ndim != 2 or c.shape[1] != 2:
-            raise ValueError(f"centers must have shape (K, 2), got {c.shape}")
+            raise ConfigError(f"centers must have shape (K, 2), got {c.shape}")
         k = len(c)
-        w = np.array(self.widths, dtype=np.float64).reshape(-1)
-        a = np.array(self.weights, dtype=np.float64).reshape(-1)
         if len(w) != k or len(a) != k:
-            raise ValueError(f"centers ({k}), widths ({len(w)}) and weights ({len(a)}) differ")
+            raise ConfigError(f"centers ({k}), widths ({len(w)}) and weights ({len(a)}) differ")
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(w)) and np.all(np.isfinite(a))
-                and np.isfinite(self.a0)):
-            raise ValueError("network parameters must be finite")
+                and np.isfinite(a0)):
+            raise ConfigError("network parameters (a0, centers, widths, weights) must be finite")
         if np.any(w <= 0):
-            raise ValueError("widths must be positive")
+            raise ConfigError("widths must be positive")
+        if not isinstance(self.frame, Frame):
+            raise ConfigError(f"frame must be a Frame, got {type(self.frame).__name__}")
+        if not isinstance(self.config, FitConfig):
+            raise ConfigError(f"config must be a FitConfig, got {type(self.config).__name__}")
+        if self.log is not None and not isinstance(self.log, FitLog):
+            raise ConfigError(f"log must be a FitLog or None, got {type(self.log).__name__}")
+        if not isinstance(self.info, dict):
+            raise ConfigError(f"info must be a dict, got {type(self.info).__name__}")
         for name, arr in (("centers", c), ("widths", w), ("weights", a)):
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
-        object.__setattr__(self, "a0", float(self.a0))
+        object.__setattr__(self, "a0", a0)
 
     # -- pickling: drop the evaluation grid cache ------------------------------------------
     def __getstate__(self) -> dict[str, Any]:
@@ -316,7 +339,7 @@ class Network:
         if n_points is not None:
             return int(n_points)
         if "n_points" not in self.info:
-            raise AsrbfError("n_points is unknown for this network; pass it explicitly")
+            raise ConfigError("n_points is unknown for this network; pass it explicitly")
         return int(self.info["n_points"])
 
     def stats(self) -> NeuronStats:
@@ -324,8 +347,7 @@ class Network:
         w = self.widths
         a = np.abs(self.weights)
         if self.n_neurons == 0:
-            nan = float("nan")
-            return NeuronStats(0, nan, nan, nan, nan, nan, nan, nan, nan)
+            return NeuronStats(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         return NeuronStats(self.n_neurons, float(w.max()), float(w.min()), float(w.mean()),
                            float(w.std()), float(a.max()), float(a.min()), float(a.mean()),
                            float(a.std()))
@@ -346,9 +368,9 @@ class Network:
     def _points(xy: np.ndarray) -> np.ndarray:
         arr = np.ascontiguousarray(xy, dtype=np.float64)
         if arr.ndim != 2 or arr.shape[1] != 2:
-            raise AsrbfError(f"xy must have shape (M, 2), got {arr.shape}")
+            raise ScanError(f"xy must have shape (M, 2), got {arr.shape}")
         if not np.all(np.isfinite(arr)):
-            raise AsrbfError("xy contains NaN or infinite values")
+            raise ScanError("xy contains NaN or infinite values")
         return arr
 
     def evaluate(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:

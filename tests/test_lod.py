@@ -143,7 +143,7 @@ def test_without_footprint_the_whole_square_is_meshed(scan, resampled) -> None:
     ({"method": "refit", "levels": 2, "d_mins": [0.04, 0.02]}, "must not decrease"),
     ({"method": "refit", "levels": 2, "d_mins": [0.0, 0.02]}, "positive finite numbers"),
     ({"method": "refit", "levels": 2, "d_mins": "ab"}, "d_mins must be a sequence"),
-    ({"method": "refit", "levels": 6, "d_mins": None}, "exceeds D_max"),
+    ({"method": "refit", "levels": 6, "d_mins": None}, "exceed D_max"),
     ({"base_resolution": 1}, "base_resolution must be an integer >= 2"),
     ({"footprint": "yes"}, "footprint must be True or False"),
     ({"net": "model.asrbf"}, "net must be a Network"),
