@@ -35,7 +35,7 @@ import numpy as np
 from . import _learn_kernels as _lk
 from . import _validate
 from ._config import FitConfig
-from ._frame import HeightField, to_height_field
+from ._frame import HeightField, HeightFieldWarning, to_height_field
 from ._io import Scan
 from ._network import FitInfo, FitLog, Network
 from ._validate import check_points, check_seed
@@ -56,6 +56,9 @@ _SIGMA_RANGE = (1e-5, 2.0)
 _CHUNK = 16_384
 _LOG_POINTS = 2_000
 _GEKF_MAX = 2_000
+#: Fraction of points on folds (see :func:`~asrbf_mesh._frame.fold_fraction`) above which
+#: the polish is skipped: most points fold over, the data is not a height field.
+FOLD_NO_POLISH = 0.5
 
 
 def auto_d_min(spacing: float, error_threshold: float = 0.01) -> float:
@@ -78,6 +81,24 @@ def auto_d_min(spacing: float, error_threshold: float = 0.01) -> float:
     0.004
     """
     return float(min(max(2.0 * spacing, error_threshold), 0.2))
+
+
+def polish_kind(fold: float, polish: str, stacklevel: int = 3) -> str:
+    """Return the polish to run: ``polish``, or ``"none"`` when most points fold over.
+
+    On a surface that is not a height field (a closed mesh, a sphere: front and back at
+    one x, y) the polish's least squares fit both sides at once: the normal equations
+    are so ill-conditioned that conjugate gradients take minutes where a range scan
+    takes a second, to no gain. Above :data:`FOLD_NO_POLISH` the polish is skipped, with
+    a :class:`~asrbf_mesh._frame.HeightFieldWarning`.
+    """
+    if polish == "none" or fold <= FOLD_NO_POLISH:
+        return polish
+    warnings.warn(f"most points ({100 * fold:.0f}%) lie on folds, so the {polish!r} polish is "
+                  "skipped (on a surface that is not a height field it barely converges); fit "
+                  "a range scan, or choose the depth direction with --view-axis",
+                  HeightFieldWarning, stacklevel=stacklevel)
+    return "none"
 
 
 def _pow2_at_most(v: float) -> int:
@@ -419,10 +440,11 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     learned = learn(hf, cfg, seed=seed, progress=progress, order=order)
     a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
     tp = time.perf_counter()
-    if cfg.polish == "weights":
+    polish = polish_kind(hf.fold, cfg.polish)
+    if polish == "weights":
         pr = polish_weights(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
                             cfg.polish_ridge)
-    elif cfg.polish == "full":
+    elif polish == "full":
         pr = polish_full(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
                          iterations=cfg.polish_iterations, ridge=cfg.polish_ridge)
     else:

@@ -218,6 +218,10 @@ class NeuronStats:
     weight_mean: float
     weight_std: float
 
+    def to_dict(self) -> dict[str, Any]:
+        """Return the statistics as a plain dict (JSON-ready: no NaN)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
     def __post_init__(self) -> None:
         check_int(self.n_neurons, "n_neurons", 0)
         for f in fields(self)[1:]:

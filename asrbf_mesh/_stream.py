@@ -48,7 +48,7 @@ from ._frame import (
     unit_height_field,
 )
 from ._io import check_scan_path
-from ._learn import MIN_POINTS, auto_d_min, fit_info, learn_from
+from ._learn import MIN_POINTS, auto_d_min, fit_info, learn_from, polish_kind
 from ._network import Network
 from ._validate import check_int, check_seed
 from .errors import ConfigError, ScanError
@@ -379,8 +379,9 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
         del all_xy
     else:
         spacing = sampling_spacing(np.concatenate(sample_xy))
+    fold = 0.0
     if len(local_s) > 10:
-        check_height_field(local_s, local_s @ rot.T, view_axis, stacklevel=2)
+        fold = check_height_field(local_s, local_s @ rot.T, view_axis, stacklevel=2)
     d_min = cfg.d_min if cfg.d_min is not None else auto_d_min(spacing, cfg.error_threshold)
 
     # passes 3..: learning, groups of blocks in a seeded order
@@ -399,7 +400,7 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
     a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
     tp = time.perf_counter()
     pr = None
-    if cfg.polish == "weights":
+    if polish_kind(fold, cfg.polish) == "weights":
         pr = _polish.polish_weights_blocks(
             lambda: (unit_block(b) for b in range(src.n_blocks)), src.n, a0, centers, widths,
             weights, cfg.support, cfg.polish_ridge)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import time
 
 import numpy as np
 import plyfile
@@ -347,3 +348,23 @@ def test_face_map_lod_set(tmp_path) -> None:
     # QEM with a preserved border stops near 4,100 faces on the face map's ragged border
     floors = [q["faces"] for q in manifest["qem"] if q["target_faces"] < 4000]
     assert all(f > 4000 for f in floors)
+
+
+def test_too_many_levels_are_refused_up_front(scan) -> None:
+    """levels=10**9 ran 90 s, then overflowed; levels past the grid's 8 samples were copies."""
+
+    t = time.perf_counter()
+    with pytest.raises(ConfigError, match=r"^levels must be at most (\d+) for this scan") as info:
+        lod_set(scan, levels=10**9)
+    assert time.perf_counter() - t < 30
+    most = int(str(info.value).split("at most ", 1)[1].split()[0])
+    assert "\n" not in str(info.value)
+    with pytest.raises(ConfigError, match=f"at most {most} "):
+        lod_set(scan, levels=most + 1)
+    levels = lod_set(scan, levels=most, footprint=False)
+    frame = levels[0].network.frame
+    short = float(frame.scale[:2].min())
+    coarsest = levels[-1].spacing_abs
+    assert round(short / coarsest) + 1 >= 8
+    with pytest.raises(ConfigError, match="levels must be at most"):
+        lod_set(scan, levels=10**9, method="refit")

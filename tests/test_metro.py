@@ -132,3 +132,27 @@ def test_cli_metro_json_and_outputs(tmp_path, capsys) -> None:
     np.savetxt(cloud, sheet().vertices)
     assert main(["metro", str(cloud), str(b)]) == 2
     assert "point set without faces" in capsys.readouterr().err
+
+
+def _cube() -> am.Mesh:
+    v = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return am.Mesh(v, f)
+
+
+def test_metro_measures_small_meshes_from_the_command_line(tmp_path, capsys) -> None:
+    """A cube (8 points) and a single triangle are meshes: metro fits nothing, so any mesh
+    with a face (and any point reference with a point) is measured."""
+    cube = _cube()
+    am.save_mesh(cube, tmp_path / "cube.ply")
+    am.save_mesh(am.Mesh(cube.vertices * 1.1, cube.faces), tmp_path / "big.ply")
+    tri = am.Mesh(np.eye(3), np.array([[0, 1, 2]]))
+    am.save_mesh(tri, tmp_path / "tri.ply")
+    assert main(["metro", str(tmp_path / "big.ply"), str(tmp_path / "cube.ply"),
+                 "--samples", "500"]) == 0
+    assert main(["metro", str(tmp_path / "tri.ply"), str(tmp_path / "tri.ply")]) == 0
+    capsys.readouterr()
+    r = metro(tri, np.array([[0.0, 0.0, 1.0]]))
+    assert r.a_to_b is None and r.b_to_a.n_samples == 1
+    assert metro(am.Mesh(cube.vertices * 1.1, cube.faces), cube, samples=500).hausdorff > 0

@@ -239,3 +239,23 @@ def test_grid_faces() -> None:
 def test_bad_arguments(franke_net: am.Network, kwargs: dict, error: type, match: str) -> None:
     with pytest.raises(error, match=match):
         reconstruct(franke_net, **kwargs)
+
+
+def test_resolution_counts_the_margin(franke_net: am.Network) -> None:
+    """--resolution R means R samples along the longer side of the area meshed."""
+    span = franke_net.frame.scale[:2]
+    longer = int(np.argmax(span))
+    for margin in (0.0, 0.5, 2.0):
+        m = reconstruct(franke_net, resolution=21, mode="full", margin_rel=margin)
+        local = (m.vertices @ franke_net.frame.rotation)[:, longer]
+        assert len(np.unique(np.round(local, 9))) == 21
+        assert np.ptp(local) == pytest.approx(span[longer] * (1 + 2 * margin))
+
+
+def test_resolution_without_margin_is_unchanged(franke_net: am.Network) -> None:
+    m = reconstruct(franke_net, resolution=33)
+    span = franke_net.frame.scale[:2]
+    step = float(span.max()) / 32
+    nx = max(int(round(span[0] / step)) + 1, 2)
+    ny = max(int(round(span[1] / step)) + 1, 2)
+    assert m.n_vertices == nx * ny
