@@ -290,7 +290,7 @@ class Network:
             raise ConfigError(f"centers ({k}), widths ({len(w)}) and weights ({len(a)}) differ")
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(w)) and np.all(np.isfinite(a))
                 and np.isfinite(a0)):
-            raise ConfigError("network parameters (a0, centers, widths, weights) must be finite")
+            raise ConfigError("network parameters must be finite")
         if np.any(w <= 0):
             raise ConfigError("widths must be positive")
         if not isinstance(self.frame, Frame):

@@ -250,7 +250,7 @@ def _cmd_lod(args: argparse.Namespace) -> int:
 def _cmd_metro(args: argparse.Namespace) -> int:
     from .evaluate._metro import metro
 
-    a, b = (load_scan(p, min_points=1, height_field=False) for p in (args.mesh, args.reference))
+    a, b = load_scan(args.mesh), load_scan(args.reference)
     outs = [x for x in (args.error_mesh, args.samples_out) if x]
     for x in outs:
         check_output_path(x, args.mesh, args.reference)
