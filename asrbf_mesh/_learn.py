@@ -401,7 +401,9 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     Network
         With ``info`` holding ``n_points``, ``ebar`` (mean |f - z| in the unit cube),
         ``error_mean`` / ``error_std`` (|depth error| in scan units), ``steps``,
-        timings and provenance.
+        timings and provenance (typed: ``net.fit_info``, a :class:`FitInfo`). When most
+        points fold over along the view axis (a closed mesh: no height field), the
+        polish is skipped with a :class:`HeightFieldWarning` (see :func:`polish_kind`).
 
     Raises
     ------
