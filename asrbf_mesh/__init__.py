@@ -26,12 +26,12 @@ if "NUMBA_THREADING_LAYER" not in _os.environ:
 from ._config import FitConfig
 from ._footprint import Footprint
 from ._frame import DuplicatePointsWarning, Frame, HeightField, HeightFieldWarning, to_height_field
-from ._holes import FillResult, HoleInfo, fill_holes, punch_holes
+from ._holes import FillResult, HoleInfo, PunchedScan, fill_holes, punch_holes
 from ._io import Scan, face_map_path, load_scan, save_mesh
-from ._learn import NeuronCapWarning, fit, learn
+from ._learn import LearnedState, NeuronCapWarning, fit, learn
 from ._lod import LodLevel, lod_set
 from ._mesh import Mesh
-from ._network import FitLog, Network, NeuronStats
+from ._network import FitInfo, FitLog, Network, NeuronStats
 from ._stream import fit_stream
 from ._surface import reconstruct
 from ._version import __version__
@@ -45,18 +45,21 @@ __all__ = [
     "FillResult",
     "FitConfig",
     "FitError",
+    "FitInfo",
     "FitLog",
     "Footprint",
     "Frame",
     "HeightField",
     "HeightFieldWarning",
     "HoleInfo",
+    "LearnedState",
     "LodLevel",
     "Mesh",
     "Network",
     "NetworkFileError",
     "NeuronCapWarning",
     "NeuronStats",
+    "PunchedScan",
     "Scan",
     "ScanError",
     "face_map_path",

@@ -130,32 +130,38 @@ class FitConfig:
     polish_ridge: float = 1e-4
 
     def __post_init__(self) -> None:
-        def real(name: str, *, lo: float = 0.0, lo_open: bool = True, hi: float = math.inf,
-                 hi_open: bool = True, optional: bool = False) -> None:
+        def check(name: str, test: Any, want: str, optional: bool) -> None:
             v = getattr(self, name)
             if v is None and optional:
                 return
+            ok, v = test(v)
+            if not ok:
+                raise ConfigError(f"{name} must be {want}, got {v!r}")
+            object.__setattr__(self, name, v)
+
+        def real(name: str, *, lo: float = 0.0, lo_open: bool = True, hi: float = math.inf,
+                 hi_open: bool = True, optional: bool = False) -> None:
             if math.isinf(hi):
                 want = "a positive finite number" if lo_open else f"a finite number >= {lo:g}"
             else:
                 want = (f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}"
                         f"{')' if hi_open else ']'}")
-            ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
-            if ok:
-                v = float(v)
-                ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
-            if not ok:
-                raise ConfigError(f"{name} must be {want}, got {v!r}")
-            object.__setattr__(self, name, v)
+
+            def test(v: Any) -> tuple[bool, Any]:
+                ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+                if ok:
+                    v = float(v)
+                    ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+                return ok, v
+
+            check(name, test, want, optional)
 
         def integer(name: str, *, lo: int, optional: bool = False) -> None:
-            v = getattr(self, name)
-            if v is None and optional:
-                return
-            if not isinstance(v, numbers.Integral) or isinstance(v, bool) or v < lo:
-                raise ConfigError(f"{name} must be an integer >= {lo}"
-                                  f"{' or None' if optional else ''}, got {v!r}")
-            object.__setattr__(self, name, int(v))
+            def test(v: Any) -> tuple[bool, Any]:
+                ok = isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= lo
+                return ok, int(v) if ok else v
+
+            check(name, test, f"an integer >= {lo}{' or None' if optional else ''}", optional)
 
         for name in ("error_threshold", "rms_threshold", "d_max", "measurement_noise",
                      "prior_variance", "gd_rate", "support", "neighbourhood_factor"):

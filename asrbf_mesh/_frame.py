@@ -16,7 +16,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._io import _collinear_xy
-from .errors import ScanError
+from .errors import ConfigError, ScanError
 
 __all__ = ["Frame", "HeightField", "HeightFieldWarning", "DuplicatePointsWarning",
            "to_height_field", "fold_fraction", "duplicate_fraction", "sampling_spacing",
@@ -69,11 +69,11 @@ class Frame:
         for name, shape in (("rotation", (3, 3)), ("offset", (3,)), ("scale", (3,))):
             arr = np.array(getattr(self, name), dtype=np.float64)
             if arr.shape != shape or not np.all(np.isfinite(arr)):
-                raise ValueError(f"Frame.{name} must be a finite array of shape {shape}")
+                raise ConfigError(f"Frame.{name} must be a finite array of shape {shape}")
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
         if np.any(self.scale <= 0):
-            raise ValueError("Frame.scale must be positive")
+            raise ConfigError("Frame.scale must be positive")
 
     def to_unit(self, world: np.ndarray) -> np.ndarray:
         """World (N, 3) points to unit-cube coordinates (N, 3)."""
@@ -119,12 +119,15 @@ class HeightField:
     spacing : float
         Typical sampling spacing in the unit square (median xy nearest-neighbour
         distance); the automatic D_min is twice this value (paper, section 5.1).
+    fold : float
+        Fraction of the points on a fold along the view axis (:func:`fold_fraction`).
     """
 
     xy: np.ndarray
     z: np.ndarray
     frame: Frame
     spacing: float
+    fold: float = 0.0
 
     @property
     def n_points(self) -> int:
@@ -266,8 +269,8 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
                               float(np.abs(local).max()), view_axis, local[:, :2])
     xy, z = unit_height_field(frame, local)
     spacing = sampling_spacing(xy)
-    check_height_field(local, pts, view_axis, warn_fraction, stacklevel=2)
-    return HeightField(xy, z, frame, spacing)
+    fold = check_height_field(local, pts, view_axis, warn_fraction, stacklevel=2)
+    return HeightField(xy, z, frame, spacing, fold)
 
 
 def frame_from_bounds(rot: np.ndarray, lo: np.ndarray, hi: np.ndarray, absmax: float,
@@ -301,15 +304,30 @@ def unit_height_field(frame: Frame, local: np.ndarray) -> tuple[np.ndarray, np.n
             np.ascontiguousarray(np.clip(unit[:, 2], 0.0, 1.0)))
 
 
+def other_axes(view_axis: str) -> str:
+    """Return the view axes other than ``view_axis``, as advice: ``'x, y or pca'``.
+
+    Examples
+    --------
+    >>> other_axes("pca")
+    'z, x or y'
+    """
+    rest = [a for a in VIEW_AXES if a != view_axis]
+    return f"{', '.join(rest[:-1])} or {rest[-1]}"
+
+
 def check_height_field(local: np.ndarray, pts: np.ndarray, view_axis: str,
-                       warn_fraction: float = 0.05, stacklevel: int = 2) -> None:
-    """Warn when the points (or a sample) fold over along the view axis or repeat."""
+                       warn_fraction: float = 0.05, stacklevel: int = 2) -> float:
+    """Warn when the points (or a sample) fold over along the view axis or repeat.
+
+    Returns the fraction of the points on a fold (:func:`fold_fraction`).
+    """
     bad = fold_fraction(local)
     if bad > warn_fraction:
         warnings.warn(
             f"{100 * bad:.0f}% of the points lie where the surface folds over itself along the "
             f"{view_axis!r} axis (several depths at one x, y): the data is not a height field "
-            "in this frame; try --view-axis pca or another axis",
+            f"in this frame; try --view-axis {other_axes(view_axis)}",
             HeightFieldWarning, stacklevel=stacklevel + 1)
     dup = duplicate_fraction(pts)
     if dup > warn_fraction:
@@ -317,3 +335,4 @@ def check_height_field(local: np.ndarray, pts: np.ndarray, view_axis: str,
             f"{100 * dup:.0f}% of the points are exact copies of other points: each copy "
             "counts again in the fit and in E-bar (remove duplicates to weigh every sample "
             "once)", DuplicatePointsWarning, stacklevel=stacklevel + 1)
+    return bad

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import sys
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator
@@ -34,15 +33,17 @@ from typing import Any
 import numpy as np
 
 from . import _learn_kernels as _lk
+from . import _validate
 from ._config import FitConfig
-from ._frame import HeightField, to_height_field
+from ._frame import HeightField, HeightFieldWarning, to_height_field
 from ._io import Scan
-from ._network import FitLog, Network
+from ._network import FitInfo, FitLog, Network
+from ._validate import check_points, check_seed
 from ._version import __version__
 from .errors import FitError, ScanError
 
-__all__ = ["fit", "learn", "learn_from", "auto_d_min", "residuals", "MIN_POINTS", "LearnedState",
-           "NeuronCapWarning"]
+__all__ = ["fit", "learn", "learn_from", "auto_d_min", "residuals", "fit_info", "MIN_POINTS",
+           "LearnedState", "NeuronCapWarning"]
 
 
 class NeuronCapWarning(UserWarning):
@@ -55,6 +56,9 @@ _SIGMA_RANGE = (1e-5, 2.0)
 _CHUNK = 16_384
 _LOG_POINTS = 2_000
 _GEKF_MAX = 2_000
+#: Fraction of points on folds (see :func:`~asrbf_mesh._frame.fold_fraction`) above which
+#: the polish is skipped: most points fold over, the data is not a height field.
+FOLD_NO_POLISH = 0.5
 
 
 def auto_d_min(spacing: float, error_threshold: float = 0.01) -> float:
@@ -77,6 +81,24 @@ def auto_d_min(spacing: float, error_threshold: float = 0.01) -> float:
     0.004
     """
     return float(min(max(2.0 * spacing, error_threshold), 0.2))
+
+
+def polish_kind(fold: float, polish: str, stacklevel: int = 3) -> str:
+    """Return the polish to run: ``polish``, or ``"none"`` when most points fold over.
+
+    On a surface that is not a height field (a closed mesh, a sphere: front and back at
+    one x, y) the polish's least squares fit both sides at once: the normal equations
+    are so ill-conditioned that conjugate gradients take minutes where a range scan
+    takes a second, to no gain. Above :data:`FOLD_NO_POLISH` the polish is skipped, with
+    a :class:`~asrbf_mesh._frame.HeightFieldWarning`.
+    """
+    if polish == "none" or fold <= FOLD_NO_POLISH:
+        return polish
+    warnings.warn(f"most points ({100 * fold:.0f}%) lie on folds, so the {polish!r} polish is "
+                  "skipped (on a surface that is not a height field it barely converges); fit "
+                  "a range scan, or choose the depth direction with --view-axis",
+                  HeightFieldWarning, stacklevel=stacklevel)
+    return "none"
 
 
 def _pow2_at_most(v: float) -> int:
@@ -208,30 +230,6 @@ class LearnedState:
     seconds: float
 
 
-def _progress(total: int, enabled: bool | None) -> Callable[[int], None] | None:
-    """Return a tick function driving a tqdm bar shown after the first second of work."""
-    if enabled is False or (enabled is None and not sys.stderr.isatty()):
-        return None
-    from tqdm import tqdm
-
-    bar: Any = None
-    t0 = time.perf_counter()
-    done = 0
-
-    def update(n: int) -> None:
-        nonlocal bar, done
-        done += n
-        if bar is None and time.perf_counter() - t0 > 1.0 and done < total:
-            bar = tqdm(total=total, initial=done, unit="step", unit_scale=True,
-                       desc="learning", leave=False, file=sys.stderr)
-        elif bar is not None:
-            bar.update(n)
-        if bar is not None and done >= total:
-            bar.close()
-
-    return update
-
-
 def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
           progress: bool | None = None,
           order: Callable[[np.random.Generator], np.ndarray] | None = None) -> LearnedState:
@@ -269,6 +267,7 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     A flat scan (every residual within E of the bias) gives a network with no
     neuron, only the bias a0: a valid result.
     """
+    seed = check_seed(seed)
     cfg = config or FitConfig()
     n = hf.n_points
     if n < MIN_POINTS:
@@ -316,7 +315,7 @@ def learn_from(batches: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], n: 
     window = cfg.window
     prune_window = cfg.prune_window or cfg.window
     state = _State(cfg, d_min, n, total, window, prune_window)
-    tick = _progress(total, progress)
+    tick = _validate.progress(total, progress, "learning", unit="step")
     t0 = time.perf_counter()
     for X, Z, order in batches:
         for start in range(0, len(order), _CHUNK):
@@ -347,6 +346,25 @@ def learn_from(batches: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], n: 
 def source_hash(points: np.ndarray) -> str:
     """SHA-256 of the point coordinates (provenance of a network)."""
     return hashlib.sha256(np.ascontiguousarray(points, dtype=np.float64).tobytes()).hexdigest()
+
+
+def fit_info(n_points: int, net: Network, source: str | None, sha256: str, seed: int,
+             spacing: float, learned: LearnedState, polished: Any, ebar: float,
+             error_mean: float, error_std: float, polish_seconds: float, fit_seconds: float,
+             **stream: Any) -> FitInfo:
+    """Build the :class:`FitInfo` of a fit, in memory or streamed (``stream``: its fields).
+
+    ``polished`` is the polish's result (its ``ebar_before`` is E-bar before the polish)
+    or None.
+    """
+    return FitInfo(
+        n_points=n_points, n_neurons=net.n_neurons, source=source, source_sha256=sha256,
+        seed=seed, spacing=spacing, d_min=learned.d_min, steps=learned.steps, ebar=ebar,
+        ebar_sequential=polished.ebar_before if polished is not None else ebar,
+        error_mean=error_mean, error_std=error_std, learn_seconds=learned.seconds,
+        polish_seconds=polish_seconds, fit_seconds=fit_seconds,
+        us_per_step=1e6 * learned.seconds / max(learned.steps, 1), version=__version__,
+        **stream)
 
 
 def residuals(net: Network, hf: HeightField) -> np.ndarray:
@@ -383,7 +401,9 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     Network
         With ``info`` holding ``n_points``, ``ebar`` (mean |f - z| in the unit cube),
         ``error_mean`` / ``error_std`` (|depth error| in scan units), ``steps``,
-        timings and provenance.
+        timings and provenance (typed: ``net.fit_info``, a :class:`FitInfo`). When most
+        points fold over along the view axis (a closed mesh: no height field), the
+        polish is skipped with a :class:`HeightFieldWarning` (see :func:`polish_kind`).
 
     Raises
     ------
@@ -403,13 +423,12 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     """
     from ._polish import polish_full, polish_weights
 
+    seed = check_seed(seed)
     cfg = (config or FitConfig()).replace(**overrides) if overrides else (config or FitConfig())
     if isinstance(scan, Scan):
         points, source = scan.points, scan.source
     else:
-        points, source = np.asarray(scan, dtype=np.float64), None
-        if points.ndim != 2 or points.shape[1] != 3:
-            raise ScanError(f"points must have shape (N, 3), got {points.shape}")
+        points, source = check_points(scan, "points"), None
     named = f"{source}: " if source else ""
     if len(points) < MIN_POINTS:
         raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points, got {len(points)}")
@@ -423,10 +442,11 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     learned = learn(hf, cfg, seed=seed, progress=progress, order=order)
     a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
     tp = time.perf_counter()
-    if cfg.polish == "weights":
+    polish = polish_kind(hf.fold, cfg.polish)
+    if polish == "weights":
         pr = polish_weights(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
                             cfg.polish_ridge)
-    elif cfg.polish == "full":
+    elif polish == "full":
         pr = polish_full(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
                          iterations=cfg.polish_iterations, ridge=cfg.polish_ridge)
     else:
@@ -438,23 +458,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     res = residuals(net, hf)
     abs_mm = np.abs(res) * hf.frame.scale[2]
     fit_seconds = time.perf_counter() - t0
-    info: dict[str, Any] = {
-        "n_points": hf.n_points,
-        "n_neurons": net.n_neurons,
-        "source": source,
-        "source_sha256": source_hash(points),
-        "seed": int(seed),
-        "spacing": hf.spacing,
-        "d_min": learned.d_min,
-        "steps": learned.steps,
-        "ebar": float(np.mean(np.abs(res))),
-        "ebar_sequential": pr.ebar_before if pr is not None else float(np.mean(np.abs(res))),
-        "error_mean": float(abs_mm.mean()),
-        "error_std": float(abs_mm.std()),
-        "learn_seconds": learned.seconds,
-        "polish_seconds": polish_seconds,
-        "fit_seconds": fit_seconds,
-        "us_per_step": 1e6 * learned.seconds / max(learned.steps, 1),
-        "version": __version__,
-    }
-    return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info)
+    info = fit_info(hf.n_points, net, source, source_hash(points), int(seed), hf.spacing,
+                    learned, pr, float(np.mean(np.abs(res))), float(abs_mm.mean()),
+                    float(abs_mm.std()), polish_seconds, fit_seconds)
+    return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info.to_dict())

@@ -39,7 +39,8 @@ from ._learn import auto_d_min, fit
 from ._mesh import Mesh
 from ._network import Network
 from ._surface import reconstruct
-from .errors import AsrbfError, ConfigError
+from ._validate import check_int, check_seed
+from .errors import ConfigError, ScanError
 
 __all__ = [
     "LodLevel",
@@ -48,6 +49,7 @@ __all__ = [
     "ply_bytes",
     "METHODS",
     "REFIT_GRID_PER_D_MIN",
+    "MIN_LEVEL_SAMPLES",
 ]
 
 Method = Literal["resample", "refit"]
@@ -58,6 +60,8 @@ METHODS: tuple[str, ...] = ("resample", "refit")
 #: ``refit`` samples the network of separation ``D_min`` at a grid of ``D_min / 4``.
 REFIT_GRID_PER_D_MIN = 4.0
 
+#: Fewest grid samples along the shorter side of the coarsest level's grid.
+MIN_LEVEL_SAMPLES = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,11 +188,7 @@ def _as_scan(scan: Scan | np.ndarray) -> Scan:
     try:
         return Scan(np.asarray(scan))
     except (TypeError, ValueError) as exc:
-        raise AsrbfError(f"scan must be a Scan or an (N, 3) array of points ({exc})") from None
-
-
-def _is_int(v: object, lo: int) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo
+        raise ScanError(f"scan must be a Scan or an (N, 3) array of points ({exc})") from None
 
 
 def _check_d_mins(d_mins: Any, levels: int) -> list[float]:
@@ -207,6 +207,32 @@ def _check_d_mins(d_mins: Any, levels: int) -> list[float]:
     return out
 
 
+
+def _check_coarsest(levels: int, span: np.ndarray, spacings: Any) -> None:
+    """Refuse levels whose grid would have fewer than MIN_LEVEL_SAMPLES along the short side.
+
+    ``spacings(i)`` is level i's grid spacing (scan units); the grid of a spacing ``s``
+    has ``round(short / s) + 1`` samples along the shorter side ``short`` (as in
+    :func:`~asrbf_mesh._surface.reconstruct`).
+    """
+    short = float(np.min(span))
+
+    def ok(i: int) -> bool:
+        return int(round(short / spacings(i))) + 1 >= MIN_LEVEL_SAMPLES
+
+    if ok(levels - 1):
+        return
+    best = 0
+    while best < levels and ok(best):
+        best += 1
+    if best == 0:
+        raise ConfigError(f"the finest level's grid would have fewer than {MIN_LEVEL_SAMPLES} "
+                          "samples along the shorter side of the scan: raise base_resolution")
+    raise ConfigError(f"levels must be at most {best} for this scan: a coarser level's grid "
+                      f"would have fewer than {MIN_LEVEL_SAMPLES} samples along the shorter "
+                      f"side, got levels={levels}")
+
+
 # --------------------------------------------------------------------------- lod_set
 
 
@@ -220,7 +246,11 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     scan : Scan or (N, 3) array
         The range scan, scan units (view axis z unless ``net`` says otherwise).
     levels : int
-        Number of levels (>= 1).
+        Number of levels (>= 1). Every level's grid must have at least
+        :data:`MIN_LEVEL_SAMPLES` (8) samples along the shorter side of the scan's
+        extent; more levels are refused with :class:`ConfigError` (the message gives
+        the most this scan allows), as are ``refit`` levels whose D_min would exceed
+        D_max.
     method : {"resample", "refit"}
         ``resample``: one network sampled at grid spacings ``s0 * 2**i``, where ``s0`` is
         the scan's own sampling spacing. ``refit``: one fit per level with
@@ -253,11 +283,10 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     Raises
     ------
     ConfigError
-        Bad ``levels``, ``method``, ``d_mins`` or ``base_resolution``.
+        Bad ``levels`` (too many for the scan, see above), ``method``, ``seed``,
+        ``d_mins`` or ``base_resolution``, or a grid too large.
     ScanError
-        Unusable scan points.
-    AsrbfError
-        A grid too large, or a footprint that selects no cell.
+        Unusable scan points, or a footprint that selects no cell.
 
     Notes
     -----
@@ -291,12 +320,12 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     >>> lods[0].mesh.n_faces > lods[1].mesh.n_faces > lods[2].mesh.n_faces
     True
     """
-    if not _is_int(levels, 1):
-        raise ConfigError(f"levels must be an integer >= 1, got {levels!r}")
+    levels = check_int(levels, "levels", 1)
     if method not in METHODS:
         raise ConfigError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
-    if base_resolution is not None and not _is_int(base_resolution, 2):
-        raise ConfigError(f"base_resolution must be an integer >= 2, got {base_resolution!r}")
+    if base_resolution is not None:
+        base_resolution = check_int(base_resolution, "base_resolution", 2)
+    seed = check_seed(seed)
     if net is not None and not isinstance(net, Network):
         raise ConfigError(f"net must be a Network, got {type(net).__name__}")
     if not isinstance(footprint, bool):
@@ -318,6 +347,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
             if not spacing:
                 spacing = to_height_field(sc.points, view_axis=frame.view_axis).spacing
             s0 = float(spacing) * gmean
+        _check_coarsest(levels, frame.scale[:2], lambda i: s0 * 2.0 ** min(i, 200))
         nbytes = network_file_bytes(net)
         out = []
         for i in range(levels):
@@ -336,6 +366,11 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     if d_mins is None:
         d0 = base_cfg.d_min if base_cfg.d_min is not None else auto_d_min(
             hf.spacing, base_cfg.error_threshold)
+        if levels > 1 and d0 * 2.0 ** min(levels - 1, 200) > base_cfg.d_max:
+            most = 1 + int(math.floor(math.log2(base_cfg.d_max / d0) + 1e-12))
+            raise ConfigError(f"levels must be at most {most} for this scan: the coarsest "
+                              f"D_min ({d0:g} * 2**{levels - 1}) would exceed D_max "
+                              f"({base_cfg.d_max:g}); use fewer levels or a larger d_max")
         dm = [d0 * 2**i for i in range(levels)]
     else:
         dm = _check_d_mins(d_mins, levels)
@@ -349,6 +384,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     else:
         s0 = max(dm[0] / REFIT_GRID_PER_D_MIN * gmean, floor)
     spacings = [s0 * d / dm[0] for d in dm]
+    _check_coarsest(levels, hf.frame.scale[:2], spacings.__getitem__)
     out = []
     for i, (d, s) in enumerate(zip(dm, spacings, strict=True)):
         t = time.perf_counter()

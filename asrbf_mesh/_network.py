@@ -11,7 +11,7 @@ import io
 import json
 import os
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -21,10 +21,10 @@ from . import _network_kernels as _nk
 from ._atomic import atomic_path, check_output_path
 from ._config import FitConfig
 from ._frame import Frame
-from ._io import _one_line
-from .errors import AsrbfError, NetworkFileError
+from ._validate import check_float, check_int, one_line
+from .errors import AsrbfError, ConfigError, NetworkFileError, ScanError
 
-__all__ = ["Network", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
+__all__ = ["Network", "FitInfo", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
 
 FORMAT_NAME = "asrbf-network"
 FORMAT_VERSION = 1
@@ -106,8 +106,107 @@ class FitLog:
 
 
 @dataclass(frozen=True)
+class FitInfo:
+    """The figures of a fit (:func:`asrbf_mesh.fit`, :func:`asrbf_mesh.fit_stream`), typed.
+
+    ``Network.info`` keeps them as the plain dict the ``.asrbf`` file stores
+    (:meth:`to_dict`); ``Network.fit_info`` gives them back as this record.
+
+    Parameters
+    ----------
+    n_points, n_neurons : int
+        N points learned from and K neurons of the network.
+    source : str or None
+        The scan file (None for points given in memory).
+    source_sha256 : str
+        SHA-256 of the point coordinates (float64).
+    seed : int
+        Seed of the replay order.
+    spacing : float
+        Sampling spacing, unit square.
+    d_min : float
+        D_min used, unit square.
+    steps : int
+        Learning steps (observations replayed).
+    ebar : float
+        Mean |f - z| in the unit cube after the polish.
+    ebar_sequential : float
+        The same before the polish (equal to ``ebar`` without a polish).
+    error_mean, error_std : float
+        Mean and standard deviation of |depth error|, scan units.
+    learn_seconds, polish_seconds, fit_seconds, us_per_step : float or None
+        Wall-clock figures; None for a network read from a file (they are not stored,
+        so that the same seed gives the same file).
+    version : str
+        asrbf-mesh version that fitted the network.
+    streamed : bool
+        Fitted by :func:`asrbf_mesh.fit_stream`.
+    chunk, mix : int or None
+        The streaming fit's block size and group size.
+    spacing_exact : bool or None
+        Streaming fit: False when the spacing came from a sample of tiles.
+    """
+
+    n_points: int
+    n_neurons: int
+    source: str | None
+    source_sha256: str
+    seed: int
+    spacing: float
+    d_min: float
+    steps: int
+    ebar: float
+    ebar_sequential: float
+    error_mean: float
+    error_std: float
+    learn_seconds: float | None = None
+    polish_seconds: float | None = None
+    fit_seconds: float | None = None
+    us_per_step: float | None = None
+    version: str = ""
+    streamed: bool = False
+    chunk: int | None = None
+    mix: int | None = None
+    spacing_exact: bool | None = None
+
+    _STREAM = ("streamed", "chunk", "mix", "spacing_exact")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the ``Network.info`` dict: timings when known, stream fields if streamed."""
+        out = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in self._STREAM and not self.streamed:
+                continue
+            if f.name in VOLATILE_INFO and v is None:
+                continue
+            out[f.name] = v
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> FitInfo:
+        """Inverse of :meth:`to_dict` (other keys are ignored).
+
+        Raises
+        ------
+        ConfigError
+            A fit figure is missing.
+        """
+        names = [f.name for f in fields(cls)]
+        required = [f.name for f in fields(cls) if f.default is MISSING]
+        missing = [n for n in required if n not in data]
+        if missing:
+            raise ConfigError(f"fit info lacks {', '.join(missing)}")
+        return cls(**{n: data[n] for n in names if n in data})
+
+
+@dataclass(frozen=True)
 class NeuronStats:
-    """Width and weight statistics of a network (the paper's Table 1), unit cube."""
+    """Width and |weight| statistics of a network (the paper's Table 1), unit cube.
+
+    A network without neurons (K = 0, a flat scan: only the bias a0) has every
+    statistic 0.0: no width and no weight, rather than NaN (which JSON cannot hold).
+    """
 
     n_neurons: int
     width_max: float
@@ -118,6 +217,17 @@ class NeuronStats:
     weight_min: float
     weight_mean: float
     weight_std: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the statistics as a plain dict (JSON-ready: no NaN)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def __post_init__(self) -> None:
+        check_int(self.n_neurons, "n_neurons", 0)
+        for f in fields(self)[1:]:
+            object.__setattr__(self, f.name, check_float(getattr(self, f.name), f.name,
+                                                         low=0.0 if f.name.startswith("width")
+                                                         else None))
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,25 +274,37 @@ class Network:
     info: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        c = np.array(self.centers, dtype=np.float64)
+        try:
+            c = np.array(self.centers, dtype=np.float64)
+            w = np.array(self.widths, dtype=np.float64).reshape(-1)
+            a = np.array(self.weights, dtype=np.float64).reshape(-1)
+            a0 = float(self.a0)
+        except (TypeError, ValueError):
+            raise ConfigError("a0, centers, widths and weights must be numbers") from None
         if c.size == 0:
             c = c.reshape(0, 2)
         if c.ndim != 2 or c.shape[1] != 2:
-            raise ValueError(f"centers must have shape (K, 2), got {c.shape}")
+            raise ConfigError(f"centers must have shape (K, 2), got {c.shape}")
         k = len(c)
-        w = np.array(self.widths, dtype=np.float64).reshape(-1)
-        a = np.array(self.weights, dtype=np.float64).reshape(-1)
         if len(w) != k or len(a) != k:
-            raise ValueError(f"centers ({k}), widths ({len(w)}) and weights ({len(a)}) differ")
+            raise ConfigError(f"centers ({k}), widths ({len(w)}) and weights ({len(a)}) differ")
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(w)) and np.all(np.isfinite(a))
-                and np.isfinite(self.a0)):
-            raise ValueError("network parameters must be finite")
+                and np.isfinite(a0)):
+            raise ConfigError("network parameters must be finite")
         if np.any(w <= 0):
-            raise ValueError("widths must be positive")
+            raise ConfigError("widths must be positive")
+        if not isinstance(self.frame, Frame):
+            raise ConfigError(f"frame must be a Frame, got {type(self.frame).__name__}")
+        if not isinstance(self.config, FitConfig):
+            raise ConfigError(f"config must be a FitConfig, got {type(self.config).__name__}")
+        if self.log is not None and not isinstance(self.log, FitLog):
+            raise ConfigError(f"log must be a FitLog or None, got {type(self.log).__name__}")
+        if not isinstance(self.info, dict):
+            raise ConfigError(f"info must be a dict, got {type(self.info).__name__}")
         for name, arr in (("centers", c), ("widths", w), ("weights", a)):
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
-        object.__setattr__(self, "a0", float(self.a0))
+        object.__setattr__(self, "a0", a0)
 
     # -- pickling: drop the evaluation grid cache ------------------------------------------
     def __getstate__(self) -> dict[str, Any]:
@@ -199,6 +321,14 @@ class Network:
         """K, the number of Gaussian neurons."""
         return int(len(self.widths))
 
+    @property
+    def fit_info(self) -> FitInfo | None:
+        """The fit figures of ``info`` as a :class:`FitInfo`; None without fit figures."""
+        try:
+            return FitInfo.from_dict(self.info)
+        except (ConfigError, TypeError):
+            return None
+
     def compression_ratio(self, n_points: int | None = None) -> float:
         """N : K, points per neuron (paper, Table 2)."""
         n = self._n_points(n_points)
@@ -213,7 +343,7 @@ class Network:
         if n_points is not None:
             return int(n_points)
         if "n_points" not in self.info:
-            raise AsrbfError("n_points is unknown for this network; pass it explicitly")
+            raise ConfigError("n_points is unknown for this network; pass it explicitly")
         return int(self.info["n_points"])
 
     def stats(self) -> NeuronStats:
@@ -221,8 +351,7 @@ class Network:
         w = self.widths
         a = np.abs(self.weights)
         if self.n_neurons == 0:
-            nan = float("nan")
-            return NeuronStats(0, nan, nan, nan, nan, nan, nan, nan, nan)
+            return NeuronStats(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         return NeuronStats(self.n_neurons, float(w.max()), float(w.min()), float(w.mean()),
                            float(w.std()), float(a.max()), float(a.min()), float(a.mean()),
                            float(a.std()))
@@ -243,9 +372,9 @@ class Network:
     def _points(xy: np.ndarray) -> np.ndarray:
         arr = np.ascontiguousarray(xy, dtype=np.float64)
         if arr.ndim != 2 or arr.shape[1] != 2:
-            raise AsrbfError(f"xy must have shape (M, 2), got {arr.shape}")
+            raise ScanError(f"xy must have shape (M, 2), got {arr.shape}")
         if not np.all(np.isfinite(arr)):
-            raise AsrbfError("xy contains NaN or infinite values")
+            raise ScanError("xy contains NaN or infinite values")
         return arr
 
     def evaluate(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
@@ -387,9 +516,9 @@ class Network:
                 ) from None
             raise NetworkFileError(f"{p}: not an asrbf network file (not a zip archive)") from None
         except OSError as exc:
-            raise NetworkFileError(f"{p}: cannot read ({exc.strerror or _one_line(exc)})") from None
+            raise NetworkFileError(f"{p}: cannot read ({exc.strerror or one_line(exc)})") from None
         except Exception as exc:  # corrupt member, truncated data, ...
-            raise NetworkFileError(f"{p}: corrupt network file ({_one_line(exc)})") from None
+            raise NetworkFileError(f"{p}: corrupt network file ({one_line(exc)})") from None
         try:
             meta = json.loads(bytes(arrays["meta"]).decode())
         except Exception:
@@ -414,4 +543,4 @@ class Network:
                        arrays["weights"], Frame.from_dict(meta["frame"]),
                        FitConfig.from_dict(meta["config"]), log, dict(meta.get("info") or {}))
         except (KeyError, ValueError, TypeError, AsrbfError) as exc:
-            raise NetworkFileError(f"{p}: corrupt network file ({_one_line(exc)})") from None
+            raise NetworkFileError(f"{p}: corrupt network file ({one_line(exc)})") from None

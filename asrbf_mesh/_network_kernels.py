@@ -22,6 +22,22 @@ def _cell(v, lo, h, g):
     return c
 
 
+@njit(cache=True, inline="always")
+def _locate(pts, i, lo, h, g):
+    """Point i (x, y) and the index of its grid cell."""
+    x = pts[i, 0]
+    y = pts[i, 1]
+    return x, y, _cell(y, lo[1], h, g) * g + _cell(x, lo[0], h, g)
+
+
+@njit(cache=True, inline="always")
+def _offset(x, y, centers, widths, j):
+    """Offset (dx, dy) of a point from neuron j, its squared length d2 and sigma_j^2."""
+    dx = x - centers[j, 0]
+    dy = y - centers[j, 1]
+    return dx, dy, dx * dx + dy * dy, widths[j] * widths[j]
+
+
 @njit(cache=True)
 def build_grid(centers, widths, support, lo, h, g):
     """CSR lists ``(start, items)`` of the neurons meeting each of the g x g cells."""
@@ -104,9 +120,7 @@ def evaluate_values(pts, a0, packed, support, lo, h, g, start):
     inv = packed[2]
     amp = packed[3]
     for i in prange(m):
-        x = pts[i, 0]
-        y = pts[i, 1]
-        c = _cell(y, lo[1], h, g) * g + _cell(x, lo[0], h, g)
+        x, y, c = _locate(pts, i, lo, h, g)
         f = 0.0
         for p in range(start[c], start[c + 1]):
             dx = x - cx[p]
@@ -126,18 +140,13 @@ def evaluate_with_gradient(pts, a0, centers, widths, weights, support, lo, h, g,
     grad = np.empty((m, 2))
     supp2 = support * support
     for i in prange(m):
-        x = pts[i, 0]
-        y = pts[i, 1]
-        c = _cell(y, lo[1], h, g) * g + _cell(x, lo[0], h, g)
+        x, y, c = _locate(pts, i, lo, h, g)
         f = a0
         gx = 0.0
         gy = 0.0
         for p in range(start[c], start[c + 1]):
             j = items[p]
-            dx = x - centers[j, 0]
-            dy = y - centers[j, 1]
-            d2 = dx * dx + dy * dy
-            s2 = widths[j] * widths[j]
+            dx, dy, d2, s2 = _offset(x, y, centers, widths, j)
             if d2 < supp2 * s2:
                 v = weights[j] * np.exp(-d2 / s2)
                 f += v
@@ -162,34 +171,25 @@ def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, 
     per = 4 if full else 1
     indptr = np.zeros(m + 1, np.int64)
     for i in range(m):
-        x = pts[i, 0]
-        y = pts[i, 1]
-        c = _cell(y, lo[1], h, g) * g + _cell(x, lo[0], h, g)
+        x, y, c = _locate(pts, i, lo, h, g)
         cnt = 1
         for p in range(start[c], start[c + 1]):
-            j = items[p]
-            dx = x - centers[j, 0]
-            dy = y - centers[j, 1]
-            if dx * dx + dy * dy < supp2 * widths[j] * widths[j]:
+            _, _, d2, s2 = _offset(x, y, centers, widths, items[p])
+            if d2 < supp2 * s2:  # the same test as the fill below, to the last bit
                 cnt += per
         indptr[i + 1] = indptr[i] + cnt
     nnz = indptr[m]
     cols = np.empty(nnz, np.int64)
     vals = np.empty(nnz)
     for i in prange(m):
-        x = pts[i, 0]
-        y = pts[i, 1]
-        c = _cell(y, lo[1], h, g) * g + _cell(x, lo[0], h, g)
+        x, y, c = _locate(pts, i, lo, h, g)
         n = indptr[i]
         cols[n] = 0
         vals[n] = 1.0
         n += 1
         for p in range(start[c], start[c + 1]):
             j = items[p]
-            dx = x - centers[j, 0]
-            dy = y - centers[j, 1]
-            d2 = dx * dx + dy * dy
-            s2 = widths[j] * widths[j]
+            dx, dy, d2, s2 = _offset(x, y, centers, widths, j)
             if d2 < supp2 * s2:
                 phi = np.exp(-d2 / s2)
                 if full:

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _polish
+from . import _polish, _validate
 from ._config import FitConfig
 from ._frame import (
     _AXES,
@@ -48,9 +48,9 @@ from ._frame import (
     unit_height_field,
 )
 from ._io import check_scan_path
-from ._learn import MIN_POINTS, auto_d_min, learn_from
+from ._learn import MIN_POINTS, auto_d_min, fit_info, learn_from, polish_kind
 from ._network import Network
-from ._version import __version__
+from ._validate import check_int, check_seed
 from .errors import ConfigError, ScanError
 
 __all__ = ["fit_stream", "block_order", "open_points", "PointBlocks", "STREAM_FORMATS",
@@ -259,23 +259,6 @@ def block_order(n: int, chunk: int, mix: int, rng: np.random.Generator) -> np.nd
 # --------------------------------------------------------------------------- fit
 
 
-def _check_int(value: Any, name: str, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
-
-
-def _ticker(total: int, enabled: bool | None, desc: str):
-    import sys
-
-    if enabled is False or (enabled is None and not sys.stderr.isatty()):
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="pt", unit_scale=True, desc=desc, leave=False,
-                file=sys.stderr)
-
-
 def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
                seed: int = 0, view_axis: str = "z", chunk: int = DEFAULT_CHUNK,
                mix: int = DEFAULT_MIX, progress: bool | None = None,
@@ -318,9 +301,9 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
         Bad ``chunk``, ``mix``, ``view_axis`` or ``polish="full"``.
     """
     cfg = (config or FitConfig()).replace(**overrides) if overrides else (config or FitConfig())
-    chunk = _check_int(chunk, "chunk", 1)
-    mix = _check_int(mix, "mix", 1)
-    seed = _check_int(seed, "seed", 0)
+    chunk = check_int(chunk, "chunk", 1)
+    mix = check_int(mix, "mix", 1)
+    seed = check_seed(seed)
     if chunk % _polish._CHUNK:
         raise ConfigError(f"chunk must be a multiple of {_polish._CHUNK:,} points, got {chunk:,}")
     if cfg.polish == "full":
@@ -340,7 +323,7 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
     hi = np.full(3, -np.inf)
     absmax = 0.0
     sha = hashlib.sha256()
-    bar = _ticker(src.n, progress, "frame")
+    tick = _validate.progress(src.n, progress, "frame", unit="pt")
     for b in range(src.n_blocks):
         pts = src.block(b)
         finite = np.isfinite(pts).all(axis=1)
@@ -352,10 +335,8 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
         np.minimum(lo, local.min(axis=0), out=lo)
         np.maximum(hi, local.max(axis=0), out=hi)
         absmax = max(absmax, float(np.abs(local).max()))
-        if bar is not None:
-            bar.update(len(pts))
-    if bar is not None:
-        bar.close()
+        if tick:
+            tick(len(pts))
 
     def unit_block(b: int) -> tuple[np.ndarray, np.ndarray]:
         return unit_height_field(frame, src.block(b) @ rot)
@@ -398,8 +379,9 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
         del all_xy
     else:
         spacing = sampling_spacing(np.concatenate(sample_xy))
+    fold = 0.0
     if len(local_s) > 10:
-        check_height_field(local_s, local_s @ rot.T, view_axis, stacklevel=2)
+        fold = check_height_field(local_s, local_s @ rot.T, view_axis, stacklevel=2)
     d_min = cfg.d_min if cfg.d_min is not None else auto_d_min(spacing, cfg.error_threshold)
 
     # passes 3..: learning, groups of blocks in a seeded order
@@ -418,7 +400,7 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
     a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
     tp = time.perf_counter()
     pr = None
-    if cfg.polish == "weights":
+    if polish_kind(fold, cfg.polish) == "weights":
         pr = _polish.polish_weights_blocks(
             lambda: (unit_block(b) for b in range(src.n_blocks)), src.n, a0, centers, widths,
             weights, cfg.support, cfg.polish_ridge)
@@ -438,27 +420,8 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
     n = src.n
     ebar = s_abs / n
     mean_mm = s_mm / n
-    info: dict[str, Any] = {
-        "n_points": n,
-        "n_neurons": net.n_neurons,
-        "source": name,
-        "source_sha256": sha.hexdigest(),
-        "seed": seed,
-        "spacing": spacing,
-        "d_min": learned.d_min,
-        "steps": learned.steps,
-        "ebar": ebar,
-        "ebar_sequential": pr.ebar_before if pr is not None else ebar,
-        "error_mean": mean_mm,
-        "error_std": math.sqrt(max(s_mm2 / n - mean_mm * mean_mm, 0.0)),
-        "learn_seconds": learned.seconds,
-        "polish_seconds": polish_seconds,
-        "fit_seconds": time.perf_counter() - t_start,
-        "us_per_step": 1e6 * learned.seconds / max(learned.steps, 1),
-        "version": __version__,
-        "streamed": True,
-        "chunk": chunk,
-        "mix": mix,
-        "spacing_exact": exact,
-    }
-    return Network(a0, centers, widths, weights, frame, cfg, learned.log, info)
+    info = fit_info(n, net, name, sha.hexdigest(), seed, spacing, learned, pr, ebar, mean_mm,
+                    math.sqrt(max(s_mm2 / n - mean_mm * mean_mm, 0.0)), polish_seconds,
+                    time.perf_counter() - t_start, streamed=True, chunk=chunk, mix=mix,
+                    spacing_exact=exact)
+    return Network(a0, centers, widths, weights, frame, cfg, learned.log, info.to_dict())

@@ -15,7 +15,8 @@ from ._frame import sampling_spacing
 from ._io import Scan
 from ._mesh import Mesh
 from ._network import Network
-from .errors import AsrbfError
+from ._validate import check_choice, check_float, check_int, check_points
+from .errors import ConfigError, ScanError
 
 __all__ = ["reconstruct", "grid_faces", "FOOTPRINT_MODES"]
 
@@ -52,11 +53,13 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     net : Network
         The fitted network.
     resolution : int, optional
-        Number of samples along the longer side of the scan's xy extent.
+        Number of samples along the longer side of the area meshed: the scan's xy
+        extent, with ``margin_rel`` of it added on both sides in mode ``full``.
     spacing_abs : float, optional
         Grid spacing in scan units (instead of ``resolution``); each axis takes the
         nearest whole number of steps, so the grid spans the extent exactly. Default: the
-        scan's own sampling spacing if known, else 200 samples along the longer side.
+        scan's own sampling spacing if known, else 200 samples along the longer side of
+        the area meshed.
     footprint : Scan or (N, 3) array, optional
         The scan whose footprint limits the mesh (modes ``scan`` and ``hull``).
     mode : {"scan", "hull", "full"}, optional
@@ -76,8 +79,11 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
 
     Raises
     ------
-    AsrbfError
-        Bad resolution or spacing, or a grid over 50 million vertices.
+    ConfigError
+        Bad ``mode``, ``resolution``, ``spacing_abs`` or ``margin_rel``, or a grid over
+        50 million vertices.
+    ScanError
+        A footprint that is not (N >= 3, 3) finite points, or that selects no grid cell.
 
     Examples
     --------
@@ -90,47 +96,44 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     >>> m.n_vertices, m.n_faces
     (121, 200)
     """
+    if not isinstance(net, Network):
+        raise ConfigError(f"net must be an asrbf_mesh.Network, got {type(net).__name__}")
     frame = net.frame
     span = frame.scale[:2]
     if mode is None:
         mode = "full" if footprint is None else "scan"
-    if mode not in FOOTPRINT_MODES:
-        raise AsrbfError(f"mode must be one of {', '.join(FOOTPRINT_MODES)}; got {mode!r}")
+    mode = check_choice(mode, "mode", FOOTPRINT_MODES)
     if mode != "full" and footprint is None:
-        raise AsrbfError(f"mode {mode!r} needs the scan as footprint")
+        raise ConfigError(f"mode {mode!r} needs the scan as footprint")
     if resolution is not None and spacing_abs is not None:
-        raise AsrbfError("give either resolution or spacing_abs, not both")
+        raise ConfigError("give either resolution or spacing_abs, not both")
+    if mode != "full":
+        margin_rel = 0.0
+    margin_rel = check_float(margin_rel, "margin_rel", low=0.0, high=10.0, high_open=True)
+    # the longer side of the area meshed: the scan's extent and the margin on both sides
+    longer = float(span.max()) * (1.0 + 2.0 * margin_rel)
     if resolution is not None:
-        if not (isinstance(resolution, (int, np.integer)) and resolution >= 2):
-            raise AsrbfError(f"resolution must be an integer >= 2, got {resolution!r}")
-        step = float(span.max()) / (resolution - 1)
+        step = longer / (check_int(resolution, "resolution", 2) - 1)
     elif spacing_abs is not None:
-        if not (np.isfinite(spacing_abs) and spacing_abs > 0):
-            raise AsrbfError(f"spacing_abs must be a positive length, got {spacing_abs!r}")
-        step = float(spacing_abs)
+        step = check_float(spacing_abs, "spacing_abs", low=0.0, low_open=True)
     elif "spacing" in net.info:
         step = float(net.info["spacing"]) * float(np.sqrt(span[0] * span[1]))
     else:
-        step = float(span.max()) / 199
-    if mode != "full":
-        margin_rel = 0.0
-    if not (0.0 <= margin_rel < 10.0):
-        raise AsrbfError(f"margin_rel must lie in [0, 10), got {margin_rel!r}")
+        step = longer / 199
     lo = frame.offset[:2] - margin_rel * span
     hi = frame.offset[:2] + (1 + margin_rel) * span
     # per axis: the nearest whole number of steps, so the grid ends exactly on the border
     nx = max(int(round((hi[0] - lo[0]) / step)) + 1, 2)
     ny = max(int(round((hi[1] - lo[1]) / step)) + 1, 2)
     if nx * ny > 50_000_000:
-        raise AsrbfError(f"a {nx} x {ny} grid is too large; raise spacing_abs or lower resolution")
+        raise ConfigError(f"a {nx} x {ny} grid is too large; raise spacing_abs or lower "
+                          "resolution")
     gx = np.linspace(lo[0], hi[0], nx)
     gy = np.linspace(lo[1], hi[1], ny)
     xy = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)
     keep = None
     if mode != "full":
-        pts = footprint.points if isinstance(footprint, Scan) else np.asarray(footprint, float)
-        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 3:
-            raise AsrbfError("footprint must be a Scan or an (N, 3) array of points")
+        pts = check_points(footprint, "footprint", min_points=3)
         local_xy = np.ascontiguousarray((pts @ frame.rotation)[:, :2])
         faces = footprint.faces if isinstance(footprint, Scan) else None
         fp = Footprint.of_points(local_xy, faces, sampling_spacing(local_xy), mode=mode)
@@ -141,7 +144,7 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     faces = grid_faces(nx, ny, keep)
     used = np.unique(faces)
     if used.size == 0:
-        raise AsrbfError("the footprint selects no grid cell (is the footprint the right scan?)")
+        raise ScanError("the footprint selects no grid cell (is the footprint the right scan?)")
     remap = np.full(nx * ny, -1, dtype=np.int64)
     remap[used] = np.arange(used.size)
     xy = xy[used]

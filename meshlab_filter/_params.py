@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pymeshlab
 
+from asrbf_mesh._validate import _is_int  # the integer rule of check_int
 from asrbf_mesh.errors import AsrbfError
 
 __all__ = [
@@ -203,10 +204,6 @@ class Param:
         listed = "".join(f"'{c}'; " for c in self.choices)  # pymeshlab's wording
         raise InvalidEnumError(f"Enum {value!r} not found. Possible values are {listed}"
                                f"(parameter {self.name}).")
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 @dataclass(frozen=True)

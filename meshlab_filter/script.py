@@ -42,7 +42,8 @@ import pymeshlab
 from asrbf_mesh._atomic import atomic_path, check_output_path
 from asrbf_mesh._io import SUPPORTED_SCAN_FORMATS, load_scan
 from asrbf_mesh._validate import jsonable as _jsonable
-from asrbf_mesh.errors import AsrbfError
+from asrbf_mesh._validate import one_line, parse_length
+from asrbf_mesh.errors import AsrbfError, ConfigError
 
 from ._filters import apply_filter, filter_list
 from ._params import FILTERS, MeshlabFilterError
@@ -56,8 +57,13 @@ class ScriptError(MeshlabFilterError):
     """A filter script is malformed or one of its steps failed (one line, says which step)."""
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
+def _percentage(text: str, where: str) -> pymeshlab.PercentageValue:
+    """``"5%"`` as a PercentageValue, by the one length rule (a percentage in (0, 100])."""
+    try:
+        parse_length(text, 100.0, where)
+    except ConfigError as exc:
+        raise ScriptError(one_line(exc)) from None
+    return pymeshlab.PercentageValue(float(text.strip()[:-1]))
 
 
 def _decode(value: Any, length: bool, where: str) -> Any:
@@ -66,15 +72,13 @@ def _decode(value: Any, length: bool, where: str) -> Any:
         if len(value) == 1 and set(value) <= {"percentage", "abs"}:
             (key, v), = value.items()
             if isinstance(v, (int, float)) and not isinstance(v, bool):
-                return (pymeshlab.PercentageValue if key == "percentage"
-                        else pymeshlab.PureValue)(float(v))
+                if key == "percentage":
+                    return _percentage(f"{float(v)!r}%", where)
+                return pymeshlab.PureValue(float(v))
         raise ScriptError(f"{where}: an object value must be {{\"percentage\": number}} or "
                           f"{{\"abs\": number}}, got {json.dumps(value)}")
     if length and isinstance(value, str) and value.strip().endswith("%"):
-        try:
-            return pymeshlab.PercentageValue(float(value.strip()[:-1]))
-        except ValueError:
-            raise ScriptError(f"{where}: not a percentage: {value!r}") from None
+        return _percentage(value, where)
     if length and isinstance(value, (int, float)) and not isinstance(value, bool):
         raise ScriptError(f"{where}: a length: write \"{value}%\" or {{\"percentage\": "
                           f"{value}}} (% of the bounding-box diagonal) or {{\"abs\": "
@@ -165,11 +169,11 @@ def _run(ms: pymeshlab.MeshSet, steps: list[tuple[str, dict[str, Any]]]) -> list
         try:
             res = apply_filter(ms, name, **params)
         except MeshlabFilterError as exc:
-            raise ScriptError(f"step {i} ({name}): {_one_line(exc)}") from exc
+            raise ScriptError(f"step {i} ({name}): {one_line(exc, 10_000)}") from exc
         except Exception as exc:  # pymeshlab's own filters: PyMeshLabException, casts, ...
             if name in FILTERS:
                 raise
-            raise ScriptError(f"step {i} ({name}): {_one_line(exc)}") from exc
+            raise ScriptError(f"step {i} ({name}): {one_line(exc, 10_000)}") from exc
         results.append({"filter": name, "result": _plain(res or {})})
     return results
 
@@ -200,7 +204,7 @@ def load_script(path: str | os.PathLike) -> list[tuple[str, dict[str, Any]]]:
     except OSError as exc:
         raise AsrbfError(f"{p}: cannot read ({exc.strerror})") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise AsrbfError(f"{p}: not a JSON filter script ({_one_line(exc)})") from None
+        raise AsrbfError(f"{p}: not a JSON filter script ({one_line(exc, 10_000)})") from None
     try:
         return check_script(steps)
     except ScriptError as exc:
@@ -253,7 +257,7 @@ def run_script_file(script_path: str | os.PathLike, in_path: str | os.PathLike,
     try:
         ms.load_new_mesh(str(src))
     except Exception as exc:  # pymeshlab's loaders raise PyMeshLabException and friends
-        raise AsrbfError(f"{src}: cannot load ({_one_line(exc)})") from None
+        raise AsrbfError(f"{src}: cannot load ({one_line(exc, 10_000)})") from None
     finally:
         os.chdir(cwd)  # a failed load leaves pymeshlab in the file's folder
     if src.suffix.lower() in SUPPORTED_SCAN_FORMATS:  # what pymeshlab let through
@@ -261,7 +265,7 @@ def run_script_file(script_path: str | os.PathLike, in_path: str | os.PathLike,
     try:
         results = _run(ms, steps)
     except ScriptError as exc:
-        raise ScriptError(f"{script}: {_one_line(exc)}") from exc
+        raise ScriptError(f"{script}: {one_line(exc, 10_000)}") from exc
     if ms.mesh_number() == 0:
         raise AsrbfError(f"{script}: the script left no mesh to save")
     m = ms.current_mesh()
@@ -271,7 +275,7 @@ def run_script_file(script_path: str | os.PathLike, in_path: str | os.PathLike,
         try:
             ms.save_current_mesh(str(tmp))
         except Exception as exc:
-            raise AsrbfError(f"{out}: cannot save ({_one_line(exc)})") from None
+            raise AsrbfError(f"{out}: cannot save ({one_line(exc, 10_000)})") from None
     return {"script": str(script), "input": str(src), "output": str(out), "steps": results,
             "meshes": int(ms.mesh_number()), "saved": saved,
             "seconds": time.perf_counter() - t0}

@@ -198,3 +198,13 @@ def test_frame_validation_and_dict_round_trip() -> None:
         Frame(np.eye(2), np.zeros(3), np.ones(3))
     with pytest.raises(ValueError, match="offset"):
         Frame(np.eye(3), [0.0, np.nan, 0.0], np.ones(3))
+
+
+@pytest.mark.parametrize("axis", ["z", "pca"])
+def test_height_field_advice_never_names_the_axis_in_use(syn, axis) -> None:
+    with pytest.warns(HeightFieldWarning) as record:
+        to_height_field(syn.sphere_points(2000), view_axis=axis)
+    text = str(record[0].message)
+    advice = text.split("try --view-axis ", 1)[1]
+    assert axis not in advice.replace(" or ", ", ").split(", ")
+    assert len(advice.replace(" or ", ", ").split(", ")) == 3

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import time
 
 import numpy as np
 import plyfile
@@ -140,7 +141,7 @@ def test_without_footprint_the_whole_square_is_meshed(scan, resampled) -> None:
     ({"method": "refit", "levels": 2, "d_mins": [0.04, 0.02]}, "must not decrease"),
     ({"method": "refit", "levels": 2, "d_mins": [0.0, 0.02]}, "positive finite numbers"),
     ({"method": "refit", "levels": 2, "d_mins": "ab"}, "d_mins must be a sequence"),
-    ({"method": "refit", "levels": 6, "d_mins": None}, "exceeds D_max"),
+    ({"method": "refit", "levels": 6, "d_mins": None}, "exceed D_max"),
     ({"base_resolution": 1}, "base_resolution must be an integer >= 2"),
     ({"footprint": "yes"}, "footprint must be True or False"),
     ({"net": "model.asrbf"}, "net must be a Network"),
@@ -318,7 +319,7 @@ def test_fast_decimate_reaches_the_target_and_keeps_the_border(scan) -> None:
     assert kept.n_faces >= 600
     same = _simplify.fast_decimate(mesh, target_faces=10 * mesh.n_faces)
     assert same.n_faces == mesh.n_faces
-    with pytest.raises(AsrbfError, match="target_faces must be a positive integer"):
+    with pytest.raises(ConfigError, match="target_faces must be an integer >= 1"):
         _simplify.fast_decimate(mesh, target_faces=0)
     with pytest.raises(AsrbfError, match="mesh has no faces"):
         _simplify.fast_decimate(am.Mesh(mesh.vertices, np.empty((0, 3))), target_faces=5)
@@ -344,3 +345,23 @@ def test_face_map_lod_set(tmp_path) -> None:
     # QEM with a preserved border stops near 4,100 faces on the face map's ragged border
     floors = [q["faces"] for q in manifest["qem"] if q["target_faces"] < 4000]
     assert all(f > 4000 for f in floors)
+
+
+def test_too_many_levels_are_refused_up_front(scan) -> None:
+    """levels=10**9 ran 90 s, then overflowed; levels past the grid's 8 samples were copies."""
+
+    t = time.perf_counter()
+    with pytest.raises(ConfigError, match=r"^levels must be at most (\d+) for this scan") as info:
+        lod_set(scan, levels=10**9)
+    assert time.perf_counter() - t < 30
+    most = int(str(info.value).split("at most ", 1)[1].split()[0])
+    assert "\n" not in str(info.value)
+    with pytest.raises(ConfigError, match=f"at most {most} "):
+        lod_set(scan, levels=most + 1)
+    levels = lod_set(scan, levels=most, footprint=False)
+    frame = levels[0].network.frame
+    short = float(frame.scale[:2].min())
+    coarsest = levels[-1].spacing_abs
+    assert round(short / coarsest) + 1 >= 8
+    with pytest.raises(ConfigError, match="levels must be at most"):
+        lod_set(scan, levels=10**9, method="refit")

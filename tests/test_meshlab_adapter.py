@@ -120,13 +120,17 @@ def test_unreferenced_vertices_are_not_part_of_the_surface(flat_mesh: am.Mesh) -
 
 
 def test_hausdorff_rejects_bad_input(flat_mesh: am.Mesh) -> None:
-    with pytest.raises(AsrbfError, match="a has no faces"):
+    with pytest.raises(am.ScanError, match="a has no faces"):
         ml.hausdorff(am.Mesh(flat_mesh.vertices, np.empty((0, 3))), flat_mesh)
-    with pytest.raises(AsrbfError, match="samples must be a positive integer"):
+    with pytest.raises(am.ConfigError, match="samples must be an integer >= 1"):
         ml.hausdorff(flat_mesh, flat_mesh, samples=0)
-    with pytest.raises(AsrbfError, match=r"b must be a non-empty \(N, 3\) array"):
+    with pytest.raises(am.ConfigError, match="seed must be an integer >= 0"):
+        ml.hausdorff(flat_mesh, flat_mesh, seed=-1)
+    with pytest.raises(am.ScanError, match=r"b must be an \(N, 3\) array"):
         ml.hausdorff(flat_mesh, np.zeros((4, 2)))
-    with pytest.raises(AsrbfError, match="b contains NaN"):
+    with pytest.raises(am.ScanError, match="b must hold at least 1 point"):
+        ml.hausdorff(flat_mesh, np.zeros((0, 3)))
+    with pytest.raises(am.ScanError, match="b contain NaN"):
         ml.hausdorff(flat_mesh, np.full((4, 3), np.nan))
 
 
@@ -205,7 +209,7 @@ def test_quadric_collapse_reaches_the_target_and_keeps_the_border(franke_mesh) -
 
 
 def test_quadric_collapse_validates(franke_mesh) -> None:
-    with pytest.raises(AsrbfError, match="target_faces must be a positive integer"):
+    with pytest.raises(am.ConfigError, match="target_faces must be an integer >= 1"):
         ml.quadric_edge_collapse(franke_mesh, target_faces=0)
 
 

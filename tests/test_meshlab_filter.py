@@ -245,12 +245,13 @@ def test_reconstruction_modes_and_margin(ms) -> None:
                            resolution=21, margin=0.25)
     v = ms.current_mesh().vertex_matrix()
     assert np.ptp(v[:, 0]) == pytest.approx(80 * 1.5)
+    assert len(np.unique(np.round(v[:, 0], 6))) == 21  # the resolution counts the margin
     ms.set_current_mesh(0)
     hull = mf.apply_filter(ms, "generate_surface_reconstruction_asrbf", mode="hull",
                            resolution=21)
     ms.set_current_mesh(0)
     foot = mf.apply_filter(ms, "generate_surface_reconstruction_asrbf", resolution=21)
-    assert foot["faces"] <= hull["faces"] < full["faces"]
+    assert foot["faces"] <= hull["faces"] <= full["faces"]
     assert mf.cache.info()["size"] >= 1
 
 
@@ -524,7 +525,13 @@ def test_script_values_for_pymeshlab_filters() -> None:
     ({"filter": "meshing_close_holes_asrbf", "params": {"maxholesize": 5}},
      "maxholesize: a length: write \"5%\" or {\"percentage\": 5}"),
     ({"filter": "meshing_close_holes_asrbf", "params": {"maxholesize": "five%"}},
-     "not a percentage: 'five%'"),
+     "a percentage like '5%'.*got 'five%'"),
+    ({"filter": "meshing_close_holes_asrbf", "params": {"maxholesize": "200%"}},
+     r"maxholesize must be a percentage in \(0, 100\], got '200%'"),
+    ({"filter": "meshing_close_holes_asrbf", "params": {"maxholesize": "-5%"}},
+     "maxholesize must be a finite length > 0"),
+    ({"filter": "meshing_close_holes_asrbf", "params": {"maxholesize": {"percentage": 150}}},
+     r"maxholesize must be a percentage in \(0, 100\]"),
     ({"filter": "meshing_close_holes", "params": {"refineholeedgelen": {"pct": 3}}},
      "an object value must be {\"percentage\": number} or {\"abs\": number}"),
     ({"filter": "compute_normal_for_point_clouds", "params": {"viewpos": ["a"]}},

@@ -130,3 +130,35 @@ def test_cli_metro_json_and_outputs(tmp_path, capsys) -> None:
     np.savetxt(cloud, sheet().vertices)
     assert main(["metro", str(cloud), str(b)]) == 2
     assert "point set without faces" in capsys.readouterr().err
+
+
+def _cube() -> am.Mesh:
+    v = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return am.Mesh(v, f)
+
+
+def test_metro_measures_small_meshes(tmp_path) -> None:
+    """A cube (8 points) and a single triangle are meshes: metro fits nothing, so any mesh
+    with a face (and any point reference with a point) is measured."""
+    cube = _cube()
+    am.save_mesh(am.Mesh(cube.vertices * 1.1, cube.faces), tmp_path / "big.ply")
+    big = am.load_scan(tmp_path / "big.ply", min_points=1, height_field=False)
+    r = metro(big, cube, samples=500)
+    assert r.hausdorff == pytest.approx(np.sqrt(3) * 0.1, rel=1e-5)
+    tri = am.Mesh(np.eye(3), np.array([[0, 1, 2]]))
+    assert metro(tri, tri).hausdorff == pytest.approx(0.0, abs=1e-6)
+    r = metro(tri, np.array([[0.0, 0.0, 1.0]]))
+    assert r.a_to_b is None and r.b_to_a.n_samples == 1
+
+
+@pytest.mark.xfail(reason="asrbf metro loads its inputs with load_scan's fit defaults "
+                          "(min_points=10, height_field=True): cli._cmd_metro should pass "
+                          "min_points=1, height_field=False (cli.py is not in this change)")
+def test_metro_command_measures_small_meshes(tmp_path, capsys) -> None:
+    cube = _cube()
+    am.save_mesh(cube, tmp_path / "cube.ply")
+    am.save_mesh(am.Mesh(cube.vertices * 1.1, cube.faces), tmp_path / "big.ply")
+    assert main(["metro", str(tmp_path / "big.ply"), str(tmp_path / "cube.ply"),
+                 "--samples", "500"]) == 0

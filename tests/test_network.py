@@ -348,3 +348,28 @@ def test_load_errors(franke_net: Network, tmp_path: Path) -> None:
 
     # the good file still loads after all that
     assert Network.load(good).n_neurons == franke_net.n_neurons
+
+
+# ----------------------------------------------------------------------------- fit info, K = 0
+
+
+def test_fit_info_is_typed_and_round_trips(franke_net, tmp_path) -> None:
+    info = franke_net.fit_info
+    assert isinstance(info, am.FitInfo)
+    assert info.n_points == franke_net.info["n_points"] and info.ebar == franke_net.info["ebar"]
+    assert info.to_dict() == franke_net.info  # the same dict, key for key
+    assert am.FitInfo.from_dict(info.to_dict()) == info
+    loaded = am.Network.load(franke_net.save(tmp_path / "n.asrbf"))
+    assert loaded.fit_info is not None and loaded.fit_info.fit_seconds is None
+    assert loaded.fit_info.ebar == info.ebar
+    bare = am.Network(0.0, np.zeros((0, 2)), [], [], franke_net.frame, franke_net.config)
+    assert bare.fit_info is None
+
+
+def test_stats_of_a_network_without_neurons_has_no_nan(franke_net) -> None:
+    bare = am.Network(0.5, np.zeros((0, 2)), [], [], franke_net.frame, franke_net.config)
+    st = bare.stats()
+    assert st.n_neurons == 0
+    values = list(st.to_dict().values())
+    assert all(np.isfinite(x) for x in values) and all(x == 0 for x in values)
+    json.dumps(st.to_dict(), allow_nan=False)  # strict JSON

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import Delaunay
 
 import asrbf_mesh as am
-from asrbf_mesh.errors import AsrbfError, ScanError
+from asrbf_mesh.errors import AsrbfError, ConfigError, ScanError
 from asrbf_mesh.evaluate._metro import MetroResult
 from asrbf_mesh.evaluate._som import (
     SomComparison,
@@ -62,7 +62,7 @@ def test_som_grid_tie_goes_to_the_square_grid() -> None:
 
 @pytest.mark.parametrize("k", [0, -3, 2.5, True, "9", None])
 def test_som_grid_rejects_non_positive_integers(k: object) -> None:
-    with pytest.raises(AsrbfError, match="k must be a positive integer"):
+    with pytest.raises(ConfigError, match="k must be an integer >= 1"):
         som_grid(k)  # type: ignore[arg-type]
 
 
@@ -148,15 +148,17 @@ def test_train_som_accepts_a_scan(franke_scan: am.Scan) -> None:
 
 
 @pytest.mark.parametrize(("points", "kwargs", "error", "match"), [
-    (np.zeros((50, 2)), {}, ScanError, r"shape \(N, 3\)"),
+    (np.zeros((50, 2)), {}, ScanError, r"\(N, 3\) array"),
     (np.full((50, 3), np.nan), {}, ScanError, "NaN or infinite"),
     (np.ones((50, 3)), {}, ScanError, "coincide"),
-    (np.random.default_rng(0).random((50, 3)), {"n_nodes": 3}, AsrbfError, "n_nodes must be"),
+    (np.random.default_rng(0).random((50, 3)), {"n_nodes": 3}, ConfigError, "n_nodes must be"),
     (np.random.default_rng(0).random((50, 3)), {"n_nodes": 64}, ScanError,
      "at least 64 points"),
-    (np.random.default_rng(0).random((50, 3)), {"iterations": 0}, AsrbfError,
+    (np.random.default_rng(0).random((50, 3)), {"iterations": 0}, ConfigError,
      "iterations must be"),
-    (np.random.default_rng(0).random((50, 3)), {"seed": -1}, AsrbfError, "seed must be"),
+    (np.random.default_rng(0).random((50, 3)), {"seed": -1}, ConfigError, "seed must be"),
+    (np.random.default_rng(0).random((50, 3)), {"seed": 1.5}, ConfigError, "seed must be"),
+    (np.random.default_rng(0).random((50, 3)), {"seed": "a"}, ConfigError, "seed must be"),
 ])
 def test_train_som_rejects_bad_input(points, kwargs, error, match) -> None:
     kw = {"n_nodes": 9} | kwargs

@@ -8,7 +8,7 @@ import pytest
 import asrbf_mesh as am
 from asrbf_mesh._footprint import Footprint
 from asrbf_mesh._surface import grid_faces, reconstruct
-from asrbf_mesh.errors import AsrbfError
+from asrbf_mesh.errors import AsrbfError, ConfigError, ScanError
 
 HOLE_CENTRE = np.array([140.0, 50.0])  # mm, inside the Franke scan
 HOLE_RADIUS = 15.0
@@ -217,23 +217,45 @@ def test_grid_faces() -> None:
 # ----------------------------------------------------------------------------- bad arguments
 
 
-@pytest.mark.parametrize(("kwargs", "match"), [
-    ({"resolution": 1}, "resolution must be an integer >= 2"),
-    ({"resolution": 10.5}, "resolution must be an integer"),
-    ({"resolution": True}, "resolution must be an integer"),
-    ({"spacing_abs": 0.0}, "spacing_abs must be a positive length"),
-    ({"spacing_abs": -1.0}, "spacing_abs must be a positive"),
-    ({"spacing_abs": float("nan")}, "spacing_abs must be a positive"),
-    ({"resolution": 10, "spacing_abs": 1.0}, "either resolution or spacing_abs"),
-    ({"margin_rel": -0.1}, r"margin_rel must lie in \[0, 10\)"),
-    ({"margin_rel": 10.0}, "margin_rel must lie in"),
-    ({"spacing_abs": 1e-4}, "too large"),
-    ({"footprint": np.zeros((5, 2))}, r"footprint must be a Scan or an \(N, 3\) array"),
-    ({"footprint": np.zeros((0, 3))}, "footprint must be"),
+@pytest.mark.parametrize(("kwargs", "error", "match"), [
+    ({"resolution": 1}, ConfigError, "resolution must be an integer >= 2"),
+    ({"resolution": 10.5}, ConfigError, "resolution must be an integer"),
+    ({"resolution": True}, ConfigError, "resolution must be an integer"),
+    ({"spacing_abs": 0.0}, ConfigError, "spacing_abs must be a finite number > 0"),
+    ({"spacing_abs": -1.0}, ConfigError, "spacing_abs must be a finite number > 0"),
+    ({"spacing_abs": float("nan")}, ConfigError, "spacing_abs must be a finite number"),
+    ({"resolution": 10, "spacing_abs": 1.0}, ConfigError, "either resolution or spacing_abs"),
+    ({"margin_rel": -0.1}, ConfigError, r"margin_rel must be a finite number >= 0.0 and < 10"),
+    ({"margin_rel": 10.0}, ConfigError, "margin_rel must be"),
+    ({"spacing_abs": 1e-4}, ConfigError, "too large"),
+    ({"mode": "square"}, ConfigError, "mode must be one of"),
+    ({"mode": "scan"}, ConfigError, "needs the scan as footprint"),
+    ({"footprint": np.zeros((5, 2))}, ScanError, r"footprint must be an \(N, 3\) array"),
+    ({"footprint": np.zeros((0, 3))}, ScanError, "footprint must"),
     ({"footprint": np.array([[1e4, 1e4, 0.0], [1e4 + 1, 1e4 + 1, 0.0], [1e4, 1e4 + 1, 0.0],
-                             [1e4 + 1, 1e4, 0.0]]), "resolution": 11},
+                             [1e4 + 1, 1e4, 0.0]]), "resolution": 11}, ScanError,
      "selects no grid cell"),
 ])
-def test_bad_arguments(franke_net: am.Network, kwargs: dict, match: str) -> None:
-    with pytest.raises(AsrbfError, match=match):
+def test_bad_arguments(franke_net: am.Network, kwargs: dict, error: type, match: str) -> None:
+    with pytest.raises(error, match=match):
         reconstruct(franke_net, **kwargs)
+
+
+def test_resolution_counts_the_margin(franke_net: am.Network) -> None:
+    """--resolution R means R samples along the longer side of the area meshed."""
+    span = franke_net.frame.scale[:2]
+    longer = int(np.argmax(span))
+    for margin in (0.0, 0.5, 2.0):
+        m = reconstruct(franke_net, resolution=21, mode="full", margin_rel=margin)
+        local = (m.vertices @ franke_net.frame.rotation)[:, longer]
+        assert len(np.unique(np.round(local, 9))) == 21
+        assert np.ptp(local) == pytest.approx(span[longer] * (1 + 2 * margin))
+
+
+def test_resolution_without_margin_is_unchanged(franke_net: am.Network) -> None:
+    m = reconstruct(franke_net, resolution=33)
+    span = franke_net.frame.scale[:2]
+    step = float(span.max()) / 32
+    nx = max(int(round(span[0] / step)) + 1, 2)
+    ny = max(int(round(span[1] / step)) + 1, 2)
+    assert m.n_vertices == nx * ny

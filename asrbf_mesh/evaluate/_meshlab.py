@@ -19,7 +19,8 @@ import pymeshlab
 
 from .._io import Scan
 from .._mesh import Mesh, compact
-from ..errors import AsrbfError
+from .._validate import check_int, check_points, check_seed, one_line
+from ..errors import AsrbfError, ConfigError, ScanError
 
 __all__ = [
     "hausdorff",
@@ -37,34 +38,20 @@ _MIN_SAMPLES = 10_000
 # --------------------------------------------------------------------------- plumbing
 
 
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split()) or type(exc).__name__
-    return text if len(text) <= 200 else text[:197] + "..."
-
-
 def _apply(ms: pymeshlab.MeshSet, name: str, **params: Any) -> dict:
     """Run filter ``name`` on ``ms`` with explicit ``params``; errors become AsrbfError."""
     try:
         out = getattr(ms, name)(**params)
     except Exception as exc:  # pymeshlab raises PyMeshLabException and friends
-        raise AsrbfError(f"pymeshlab {name} failed: {_one_line(exc)}") from None
+        raise AsrbfError(f"pymeshlab {name} failed: {one_line(exc, 200)}") from None
     return out if isinstance(out, dict) else {}
-
-
-def _check_points(points: np.ndarray, what: str) -> np.ndarray:
-    p = np.ascontiguousarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
-        raise AsrbfError(f"{what} must be a non-empty (N, 3) array of points, got shape {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise AsrbfError(f"{what} contains NaN or infinite coordinates")
-    return p
 
 
 def _check_mesh(mesh: Mesh, what: str) -> None:
     if not isinstance(mesh, Mesh):
-        raise AsrbfError(f"{what} must be an asrbf_mesh.Mesh, got {type(mesh).__name__}")
+        raise ScanError(f"{what} must be an asrbf_mesh.Mesh, got {type(mesh).__name__}")
     if mesh.n_faces == 0:
-        raise AsrbfError(f"{what} has no faces")
+        raise ScanError(f"{what} has no faces")
 
 
 def _to_ml(vertices: np.ndarray, faces: np.ndarray | None = None) -> pymeshlab.Mesh:
@@ -212,16 +199,17 @@ def hausdorff(a: Mesh | Scan, b: Mesh | Scan | np.ndarray, *, samples: int | Non
     if isinstance(b, Scan):
         b = b.to_mesh() if b.faces is not None else b.points
     _check_mesh(a, "a")
-    if samples is not None and not (isinstance(samples, (int, np.integer)) and samples >= 1):
-        raise AsrbfError(f"samples must be a positive integer, got {samples!r}")
+    if samples is not None:
+        samples = check_int(samples, "samples", 1)
+    seed = check_seed(seed)
     va, fa = compact(a.vertices, a.faces)
     if isinstance(b, Mesh):
         _check_mesh(b, "b")
         vb, fb = compact(b.vertices, b.faces)
     else:
-        vb, fb = _check_points(b, "b"), None
+        vb, fb = check_points(b, "b"), None
     if not (np.all(np.isfinite(va)) and np.all(np.isfinite(vb))):
-        raise AsrbfError("hausdorff: meshes must have finite vertex coordinates")
+        raise ScanError("hausdorff: meshes must have finite vertex coordinates")
     lo, hi = vb.min(axis=0), vb.max(axis=0)
     centre = 0.5 * (lo + hi)
     diagonal = float(np.linalg.norm(hi - lo))
@@ -306,10 +294,10 @@ def repair_non_manifold(vertices: np.ndarray, faces: np.ndarray, *,
     AsrbfError
         Bad arrays or a pymeshlab failure.
     """
-    v = _check_points(vertices, "vertices")
+    v = check_points(vertices, "vertices")
     f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(f) == 0 or f.min() < 0 or f.max() >= len(v):
-        raise AsrbfError(f"faces must be a non-empty (F, 3) array of indices into {len(v)} "
+        raise ScanError(f"faces must be a non-empty (F, 3) array of indices into {len(v)} "
                          "vertices")
     ms = pymeshlab.MeshSet()
     ms.add_mesh(_to_ml(v, f))
@@ -364,8 +352,7 @@ def close_holes(mesh: Mesh, *, max_hole_edges: int) -> Mesh:
         Bad arguments or a pymeshlab failure.
     """
     _check_mesh(mesh, "mesh")
-    if not (isinstance(max_hole_edges, (int, np.integer)) and max_hole_edges >= 3):
-        raise AsrbfError(f"max_hole_edges must be an integer >= 3, got {max_hole_edges!r}")
+    check_int(max_hole_edges, "max_hole_edges", 3)
     ms = pymeshlab.MeshSet()
     ms.add_mesh(_to_ml(mesh.vertices, mesh.faces))
     _repair(ms)
@@ -422,13 +409,12 @@ def screened_poisson(points: np.ndarray, *, depth: int = 8, k_normals: int = 10,
     AsrbfError
         Fewer than ``k_normals + 1`` points, bad parameters, or a pymeshlab failure.
     """
-    p = _check_points(points, "points")
+    p = check_points(points, "points")
     for name, val, lo in (("depth", depth, 1), ("k_normals", k_normals, 3),
                           ("threads", threads, 1)):
-        if not (isinstance(val, (int, np.integer)) and val >= lo):
-            raise AsrbfError(f"{name} must be an integer >= {lo}, got {val!r}")
+        check_int(val, name, lo)
     if len(p) <= k_normals:
-        raise AsrbfError(f"screened Poisson needs more than k_normals={k_normals} points, "
+        raise ScanError(f"screened Poisson needs more than k_normals={k_normals} points, "
                          f"got {len(p)}")
     ms = pymeshlab.MeshSet()
     ms.add_mesh(_to_ml(p))
@@ -470,9 +456,9 @@ def ball_pivoting(points: np.ndarray, *, radius_rel: float | None = None) -> Mes
     IEEE TVCG 5(4), 1999. Fixed: ``clustering`` 20 % of the radius, ``creasethr`` 90°,
     ``deletefaces`` False.
     """
-    p = _check_points(points, "points")
+    p = check_points(points, "points")
     if radius_rel is not None and not (np.isfinite(radius_rel) and 0 < radius_rel <= 1):
-        raise AsrbfError(f"radius_rel must be a fraction of the diagonal in (0, 1], "
+        raise ConfigError(f"radius_rel must be a fraction of the diagonal in (0, 1], "
                          f"got {radius_rel!r}")
     ms = pymeshlab.MeshSet()
     ms.add_mesh(_to_ml(p))
@@ -528,8 +514,7 @@ def quadric_edge_collapse(mesh: Mesh, *, target_faces: int, preserve_border: boo
         Bad arguments or a pymeshlab failure.
     """
     _check_mesh(mesh, "mesh")
-    if not (isinstance(target_faces, (int, np.integer)) and target_faces >= 1):
-        raise AsrbfError(f"target_faces must be a positive integer, got {target_faces!r}")
+    check_int(target_faces, "target_faces", 1)
     v, f = compact(mesh.vertices, mesh.faces)
     ms = pymeshlab.MeshSet()
     ms.add_mesh(_to_ml(v, f))

@@ -24,7 +24,8 @@ import numpy as np
 
 from .._io import Scan
 from .._mesh import Mesh
-from ..errors import AsrbfError
+from .._validate import check_int, check_seed
+from ..errors import AsrbfError, ScanError
 from . import _meshlab
 
 __all__ = ["Direction", "MetroResult", "metro"]
@@ -151,12 +152,12 @@ def _as_surface(x: Mesh | Scan | np.ndarray, name: str,
         if points_ok:
             return x.points
         where = x.source or f"metro: {name}"
-        raise AsrbfError(f"{where}: is a point set without faces; it must be a mesh")
+        raise ScanError(f"{where}: is a point set without faces; it must be a mesh")
     if isinstance(x, Mesh):
         return x
     if points_ok:
         return np.asarray(x, dtype=np.float64)
-    raise AsrbfError(f"metro: {name} must be a Mesh or a Scan with faces, got "
+    raise ScanError(f"metro: {name} must be a Mesh or a Scan with faces, got "
                      f"{type(x).__name__}")
 
 
@@ -190,11 +191,17 @@ def metro(a: Mesh | Scan, b: Mesh | Scan | np.ndarray, *, samples: int | None = 
     -------
     MetroResult
 
+    Any mesh with at least one face is measured (a cube, a single triangle), against
+    a reference mesh with at least one face or a point set of at least one point.
+
     Raises
     ------
+    ConfigError
+        Bad ``samples`` or ``seed``.
+    ScanError
+        A mesh without faces, non-finite coordinates.
     AsrbfError
-        A mesh without faces, non-finite coordinates, bad ``samples``, or a pymeshlab
-        failure.
+        A pymeshlab failure.
 
     Examples
     --------
@@ -204,6 +211,9 @@ def metro(a: Mesh | Scan, b: Mesh | Scan | np.ndarray, *, samples: int | None = 
     >>> round(r.hausdorff, 6), round(r.mean, 6), round(r.rms, 6)
     (0.25, 0.25, 0.25)
     """
+    seed = check_seed(seed)
+    if samples is not None:
+        samples = check_int(samples, "samples", 1)
     mesh_a = _as_surface(a, "a", points_ok=False)
     ref = _as_surface(b, "b", points_ok=True)
     d = _meshlab.hausdorff(mesh_a, ref, samples=samples, seed=seed, keep_samples=per_sample)

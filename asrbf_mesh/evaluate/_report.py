@@ -15,7 +15,6 @@ import base64
 import html
 import json
 import os
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -28,6 +27,8 @@ from .._atomic import atomic_path
 from .._igl import point_mesh_distance
 from .._io import Scan, save_mesh
 from .._network import Network
+from .._validate import check_int, check_seed, strict_json
+from .._validate import progress as progress_bar
 from ..errors import AsrbfError
 from . import _plots as plots
 
@@ -95,10 +96,8 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
     AsrbfError
         A scan without faces, or a failure of one of the steps.
     """
-    from tqdm.auto import tqdm
-
     from .._learn import fit
-    from ._som import _check_count, compare_som
+    from ._som import compare_som
 
     if scan.faces is None or len(scan.faces) == 0:
         raise AsrbfError(f"{scan.source or 'scan'}: compare needs a scan with faces (a range "
@@ -106,26 +105,25 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
     if lod and lod_dir is None:
         raise AsrbfError("compare: lod=True needs lod_dir")
     if som_iterations is not None:
-        _check_count(som_iterations, "som_iterations", 1)
+        check_int(som_iterations, "som_iterations", 1)
+    seed = check_seed(seed)
     steps = ["fit", "SOM baseline", *(["hole benchmark"] if holes else []),
              *(["LOD set"] if lod else [])]
-    shown = progress if progress is not None else sys.stderr.isatty()
-    bar = tqdm(total=len(steps), desc="compare", unit="step", disable=not shown, leave=False,
-               file=sys.stderr)
+    tick = progress_bar(len(steps), progress, "compare", unit="step")
     label = name or (Path(scan.source).stem if scan.source else "scan")
     times: dict[str, float] = {}
     try:
-        bar.set_postfix_str("fit")
         t0 = time.perf_counter()
         if net is None:
             net = fit(scan, seed=seed, progress=False)
         times["fit"] = time.perf_counter() - t0
-        bar.update()
-        bar.set_postfix_str("SOM baseline")
+        if tick:
+            tick(1)
         t0 = time.perf_counter()
         som = compare_som(scan, net, seed=seed, iterations=som_iterations)
         times["som"] = time.perf_counter() - t0
-        bar.update()
+        if tick:
+            tick(1)
         data: dict[str, Any] = {
             "scan": label, "source": str(scan.source) if scan.source else None,
             "n_points": scan.n_points, "n_neurons": net.n_neurons,
@@ -141,25 +139,26 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
         if holes:
             from ._holes_bench import hole_benchmark
 
-            bar.set_postfix_str("hole benchmark")
             t0 = time.perf_counter()
             rows = hole_benchmark(scan, seed=seed)
             data["holes"] = [r.__dict__ for r in rows]
             times["holes"] = time.perf_counter() - t0
-            bar.update()
+            if tick:
+                tick(1)
         levels = None
         if lod:
             from .._lod import lod_set
             from ._lod_report import write_lod_set
 
-            bar.set_postfix_str("LOD set")
             t0 = time.perf_counter()
             levels = lod_set(scan, levels=4, method="resample", seed=seed, net=net)
             data["lod"] = write_lod_set(scan, levels, lod_dir, compare_qem=True)
             times["lod"] = time.perf_counter() - t0
-            bar.update()
+            if tick:
+                tick(1)
     finally:
-        bar.close()
+        if tick:
+            tick.close()  # type: ignore[attr-defined]
     data["seconds"] = times
     return Comparison(data, scan, net, som, levels)
 
@@ -342,7 +341,7 @@ def write_compare(c: Comparison, out_dir: str | os.PathLike, *,
     md.append("Metro: " + _SAMPLING_NOTE)
     blocks.append(f"<p><small>Metro: {html.escape(_SAMPLING_NOTE)}</small></p>")
     written["json"] = out / "compare.json"
-    _write_text(written["json"], json.dumps(d, indent=1, default=_json_default))
+    _write_text(written["json"], strict_json(d, indent=1))
     written["markdown"] = out / "report.md"
     _write_text(written["markdown"], "\n".join(md) + "\n")
     written["html"] = out / "report.html"
@@ -354,16 +353,6 @@ _SAMPLING_NOTE = ("pymeshlab's Hausdorff filter in both directions between each 
                   "scan's own mesh; every vertex plus a seeded uniform area sampling; mean and "
                   "RMS over the area samples, averaged over the two directions; Hausdorff the "
                   "larger maximum; % of the scan's bounding-box diagonal.")
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serializable: {type(o).__name__}")
 
 
 def load_compare(path: str | os.PathLike) -> dict[str, Any]:
@@ -449,8 +438,8 @@ def write_summary(results: Sequence[dict[str, Any]], out_dir: str | os.PathLike,
              "json": out / "summary.json"}
     _write_text(paths["markdown"], "\n".join(md) + "\n")
     _write_text(paths["html"], _page(title, blocks))
-    _write_text(paths["json"], json.dumps({"scans": list(results), "average": dict(zip(
+    _write_text(paths["json"], strict_json({"scans": list(results), "average": dict(zip(
         [f"asrbf_{k}" for k in keys] + [f"som_{k}" for k in keys], mean, strict=True)),
-        "ours_better_on_all": wins}, indent=1, default=_json_default))
+        "ours_better_on_all": wins}, indent=1))
     return paths
 

@@ -16,7 +16,8 @@ import fast_simplification
 import numpy as np
 
 from .._mesh import Mesh, compact
-from ..errors import AsrbfError
+from .._validate import check_float, check_int, one_line
+from ..errors import AsrbfError, ScanError
 
 __all__ = ["fast_decimate"]
 
@@ -50,8 +51,12 @@ def fast_decimate(mesh: Mesh, *, target_faces: int, preserve_border: bool = True
 
     Raises
     ------
+    ScanError
+        Not a mesh, or a mesh without faces.
+    ConfigError
+        Bad ``target_faces`` or ``aggressiveness``.
     AsrbfError
-        Bad arguments, or an error inside fast-simplification.
+        An error inside fast-simplification.
 
     Notes
     -----
@@ -69,13 +74,11 @@ def fast_decimate(mesh: Mesh, *, target_faces: int, preserve_border: bool = True
     True
     """
     if not isinstance(mesh, Mesh):
-        raise AsrbfError(f"mesh must be an asrbf_mesh.Mesh, got {type(mesh).__name__}")
+        raise ScanError(f"mesh must be an asrbf_mesh.Mesh, got {type(mesh).__name__}")
     if mesh.n_faces == 0:
-        raise AsrbfError("mesh has no faces")
-    if not (isinstance(target_faces, (int, np.integer)) and target_faces >= 1):
-        raise AsrbfError(f"target_faces must be a positive integer, got {target_faces!r}")
-    if not (np.isfinite(aggressiveness) and aggressiveness >= 0):
-        raise AsrbfError(f"aggressiveness must be a number >= 0, got {aggressiveness!r}")
+        raise ScanError("mesh has no faces")
+    target_faces = check_int(target_faces, "target_faces", 1)
+    aggressiveness = check_float(aggressiveness, "aggressiveness", low=0.0)
     v, f = compact(mesh.vertices, mesh.faces)
     if target_faces >= len(f):
         return Mesh(v, f)
@@ -86,8 +89,7 @@ def fast_decimate(mesh: Mesh, *, target_faces: int, preserve_border: bool = True
                 target_count=int(target_faces), agg=float(aggressiveness), verbose=False,
                 return_collapses=False, lossless=False, preserve_border=bool(preserve_border))
     except Exception as exc:
-        text = " ".join(str(exc).split()) or type(exc).__name__
-        raise AsrbfError(f"fast-simplification failed: {text[:200]}") from None
+        raise AsrbfError(f"fast-simplification failed: {one_line(exc, 200)}") from None
     tris = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
     if len(tris) == 0:
         raise AsrbfError("fast-simplification returned an empty mesh")

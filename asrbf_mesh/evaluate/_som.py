@@ -21,9 +21,7 @@ both vertex sets.
 from __future__ import annotations
 
 import math
-import sys
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,7 +34,9 @@ from .._io import Scan
 from .._mesh import Mesh
 from .._network import Network
 from .._surface import grid_faces
-from ..errors import AsrbfError, ScanError
+from .._validate import check_int, check_points, check_seed
+from .._validate import progress as progress_bar
+from ..errors import AsrbfError, ConfigError, ScanError
 from . import _meshlab
 from ._metro import MetroResult, metro
 from ._som_kernels import train_online
@@ -85,8 +85,7 @@ def som_grid(k: int) -> tuple[int, int]:
     >>> som_grid(727), som_grid(1), som_grid(3)
     ((27, 27), (1, 1), (2, 2))
     """
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-        raise AsrbfError(f"k must be a positive integer node count, got {k!r}")
+    k = check_int(k, "k", 1)
     n = math.isqrt(int(k))  # n*n <= k < (n+1)*(n+1)
     grids = [(n, n), (n + 1, n), (n + 1, n + 1)]
     return min(grids, key=lambda g: (abs(g[0] * g[1] - int(k)), g[0] - g[1]))
@@ -158,42 +157,6 @@ class SomMap:
                 "iterations": self.iterations, "seconds": self.seconds,
                 "quantization_error": self.quantization_error, "sigma": self.sigma,
                 "learning_rate": self.learning_rate, "seed": self.seed}
-
-
-def _check_points(points: Scan | np.ndarray, what: str = "points") -> np.ndarray:
-    p = points.points if isinstance(points, Scan) else points
-    try:
-        p = np.asarray(p, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ScanError(f"{what} must be an (N, 3) array of numbers") from None
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise ScanError(f"{what} must have shape (N, 3), got {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise ScanError(f"{what} contain NaN or infinite coordinates")
-    return p
-
-
-def _check_count(value: Any, name: str, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise AsrbfError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
-
-
-def _ticker(total: int, enabled: bool | None, desc: str) -> Callable[[int], None] | None:
-    """Return a tick function driving a tqdm bar (default: on a terminal, long runs)."""
-    if enabled is False or (enabled is None and not (sys.stderr.isatty() and total > 50_000)):
-        return None
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, unit="step", unit_scale=True, desc=desc, leave=False,
-               file=sys.stderr)
-
-    def tick(n: int) -> None:
-        bar.update(n)
-        if bar.n >= total:
-            bar.close()
-
-    return tick
 
 
 def _pca_init(x: np.ndarray, rows: int, cols: int) -> np.ndarray:
@@ -279,14 +242,14 @@ def train_som(points: Scan | np.ndarray, n_nodes: int, *, seed: int = 0,
     >>> som.shape, som.nodes.shape
     ((5, 5), (25, 3))
     """
-    p = _check_points(points)
-    n_nodes = _check_count(n_nodes, "n_nodes", 4)
-    seed = _check_count(seed, "seed", 0)
+    p = check_points(points)
+    n_nodes = check_int(n_nodes, "n_nodes", 4)
+    seed = check_seed(seed)
     if len(p) < n_nodes:
         raise ScanError(f"a SOM of {n_nodes} nodes needs at least {n_nodes} points, "
                         f"got {len(p)}")
     rows, cols = som_grid(n_nodes)
-    steps = STEPS_PER_NODE * rows * cols if iterations is None else _check_count(
+    steps = STEPS_PER_NODE * rows * cols if iterations is None else check_int(
         iterations, "iterations", 1)
     t0 = time.perf_counter()
     centre = p.mean(axis=0)
@@ -298,7 +261,7 @@ def train_som(points: Scan | np.ndarray, n_nodes: int, *, seed: int = 0,
     w = _pca_init(x, rows, cols)
     order = np.arange(steps, dtype=np.int64) % len(x)
     np.random.default_rng(seed).shuffle(order)
-    tick = _ticker(steps, progress, "SOM")
+    tick = progress_bar(steps, progress, "SOM")
     chunk = 200_000
     for start in range(0, steps, chunk):
         stop = min(start + chunk, steps)
@@ -400,10 +363,10 @@ def network_vertices(net: Network, n: int, footprint_scan: Scan | np.ndarray, *,
     (100, 3)
     """
     if not isinstance(net, Network):
-        raise AsrbfError(f"net must be an asrbf_mesh.Network, got {type(net).__name__}")
-    n = _check_count(n, "n", 3)
-    seed = _check_count(seed, "seed", 0)
-    pts = _check_points(footprint_scan, "footprint_scan points")
+        raise ConfigError(f"net must be an asrbf_mesh.Network, got {type(net).__name__}")
+    n = check_int(n, "n", 3)
+    seed = check_seed(seed)
+    pts = check_points(footprint_scan, "footprint_scan points")
     faces = footprint_scan.faces if isinstance(footprint_scan, Scan) else None
     if len(pts) < 3:
         raise ScanError(f"footprint_scan needs at least 3 points, got {len(pts)}")
@@ -414,7 +377,7 @@ def network_vertices(net: Network, n: int, footprint_scan: Scan | np.ndarray, *,
     step = math.sqrt(area / n) / 3.0
     nx, ny = np.maximum(np.ceil((hi - lo) / step).astype(np.int64) + 1, 2)
     if nx * ny > 50_000_000:
-        raise AsrbfError(f"n={n} is too large for this footprint")
+        raise ConfigError(f"n={n} is too large for this footprint")
     gx = np.linspace(lo[0], hi[0], nx)  # spans the scan's extent exactly
     gy = np.linspace(lo[1], hi[1], ny)
     centres = np.stack(np.meshgrid(0.5 * (gx[:-1] + gx[1:]), 0.5 * (gy[:-1] + gy[1:])),
@@ -561,7 +524,7 @@ def compare_som(scan: Scan, net: Network | None = None, *, seed: int = 0,
         raise ScanError(f"{scan.source or 'scan'}: the SOM comparison needs a scan with faces "
                         "(the Metro reference)")
     if net is not None and not isinstance(net, Network):
-        raise AsrbfError(f"net must be an asrbf_mesh.Network, got {type(net).__name__}")
+        raise ConfigError(f"net must be an asrbf_mesh.Network, got {type(net).__name__}")
     seconds: dict[str, float] = {"fit": 0.0}
     if net is None:
         t0 = time.perf_counter()
