@@ -61,7 +61,7 @@ METHODS: tuple[str, ...] = ("resample", "refit")
 REFIT_GRID_PER_D_MIN = 4.0
 
 #: Fewest grid samples along the shorter side of the coarsest level's grid.
-MIN_LEVEL_SAMPLES = 8
+MIN_LEVEL_SAMPLES = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -247,7 +247,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         The range scan, scan units (view axis z unless ``net`` says otherwise).
     levels : int
         Number of levels (>= 1). Every level's grid must have at least
-        :data:`MIN_LEVEL_SAMPLES` (8) samples along the shorter side of the scan's
+        :data:`MIN_LEVEL_SAMPLES` (4) samples along the shorter side of the scan's
         extent; more levels are refused with :class:`ConfigError` (the message gives
         the most this scan allows), as are ``refit`` levels whose D_min would exceed
         D_max.
@@ -336,18 +336,21 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     fp_kw: dict[str, Any] = {"footprint": sc, "mode": "scan"} if footprint else {}
 
     if method == "resample":
-        if net is None:
-            net = fit(sc, seed=seed, progress=False)
-        frame = net.frame
+        # the grid spacings come from the scan alone: refuse too many levels before the fit
+        frame = net.frame if net is not None else None
+        spacing = net.info.get("spacing") if net is not None else None
+        if frame is None or not spacing:
+            hf = to_height_field(sc.points, view_axis=frame.view_axis if frame else "z",
+                                 warn_fraction=1.0)  # the fit warns, once
+            frame, spacing = frame or hf.frame, spacing or hf.spacing
         gmean = float(np.sqrt(frame.scale[0] * frame.scale[1]))
         if base_resolution is not None:
             s0 = float(frame.scale[:2].max()) / (base_resolution - 1)
         else:
-            spacing = net.info.get("spacing")
-            if not spacing:
-                spacing = to_height_field(sc.points, view_axis=frame.view_axis).spacing
             s0 = float(spacing) * gmean
         _check_coarsest(levels, frame.scale[:2], lambda i: s0 * 2.0 ** min(i, 200))
+        if net is None:
+            net = fit(sc, seed=seed, progress=False)
         nbytes = network_file_bytes(net)
         out = []
         for i in range(levels):

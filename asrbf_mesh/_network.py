@@ -204,19 +204,19 @@ class FitInfo:
 class NeuronStats:
     """Width and |weight| statistics of a network (the paper's Table 1), unit cube.
 
-    A network without neurons (K = 0, a flat scan: only the bias a0) has every
-    statistic 0.0: no width and no weight, rather than NaN (which JSON cannot hold).
+    A network without neurons (K = 0, a flat scan: only the bias a0) has no widths and
+    no weights: every statistic is None (``null`` in JSON), never NaN.
     """
 
     n_neurons: int
-    width_max: float
-    width_min: float
-    width_mean: float
-    width_std: float
-    weight_max: float
-    weight_min: float
-    weight_mean: float
-    weight_std: float
+    width_max: float | None
+    width_min: float | None
+    width_mean: float | None
+    width_std: float | None
+    weight_max: float | None
+    weight_min: float | None
+    weight_mean: float | None
+    weight_std: float | None
 
     def to_dict(self) -> dict[str, Any]:
         """Return the statistics as a plain dict (JSON-ready: no NaN)."""
@@ -225,6 +225,8 @@ class NeuronStats:
     def __post_init__(self) -> None:
         check_int(self.n_neurons, "n_neurons", 0)
         for f in fields(self)[1:]:
+            if self.n_neurons == 0 and getattr(self, f.name) is None:
+                continue
             object.__setattr__(self, f.name, check_float(getattr(self, f.name), f.name,
                                                          low=0.0 if f.name.startswith("width")
                                                          else None))
@@ -351,7 +353,7 @@ class Network:
         w = self.widths
         a = np.abs(self.weights)
         if self.n_neurons == 0:
-            return NeuronStats(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            return NeuronStats(0, *[None] * 8)
         return NeuronStats(self.n_neurons, float(w.max()), float(w.min()), float(w.mean()),
                            float(w.std()), float(a.max()), float(a.min()), float(a.mean()),
                            float(a.std()))

@@ -166,8 +166,8 @@ def _show_metro(d: dict[str, Any], args: argparse.Namespace) -> None:
     print(f"  {'':<18} {'Hausdorff':>12} {'mean':>12} {'RMS':>12} {'samples':>9}")
     for name, h, m, r, n in rows:
         print(f"  {name:<18} {h:12.5g} {m:12.5g} {r:12.5g} {n:9,}")
-    print(f"  % of diagonal      {d['hausdorff_pct']:12.4f} {d['mean_pct']:12.4f} "
-          f"{d['rms_pct']:12.4f}")
+    print(f"  % of diagonal      {_f(d['hausdorff_pct'], '12.4f'):>12} "
+          f"{_f(d['mean_pct'], '12.4f'):>12} {_f(d['rms_pct'], '12.4f'):>12}")
     for x in (args.error_mesh, args.samples_out):
         if x:
             print(f"  wrote {x}")

@@ -40,8 +40,6 @@ __all__ = ["COMMANDS", "check_options", "compare", "fill_holes", "filter_script"
 
 #: Most levels ``lod`` accepts before looking at the scan (level 12 is 2048 times coarser).
 MAX_LEVELS = 12
-#: Fewest grid samples along the shorter side of the coarsest LOD level.
-MIN_LEVEL_SAMPLES = 8
 #: Files each folder command writes: an existing folder holding only these is replaced.
 LOD_FILES = ("manifest.json", "level_*.ply", "level_*.asrbf", "network.asrbf", "qem_*.ply")
 COMPARE_FILES = ("compare.json", "report.md", "report.html", "img", "lod", "asrbf_bpa.ply",
@@ -155,7 +153,7 @@ def info(network: str | os.PathLike) -> dict[str, Any]:
     net = Network.load(network)
     return jsonable({"n_neurons": net.n_neurons, "format_version": FORMAT_VERSION,
                      "config": net.config.to_dict(), "frame": net.frame.to_dict(),
-                     "stats": net.stats().__dict__, "info": net.info,
+                     "stats": net.stats().to_dict(), "info": net.info,
                      "log": net.log.counters() if net.log else None})
 
 
@@ -247,41 +245,6 @@ def _check_lod(*, levels: int, method: str, compare_qem: bool, metro: bool,
     check_seed(seed)
 
 
-def _check_levels_fit(points: Any, levels: int, method: str) -> None:
-    """Refuse a level count whose coarsest grid has < MIN_LEVEL_SAMPLES along the short side.
-
-    Level ``i`` samples the scan at ``s0 * 2**i`` (``s0``: the scan's spacing, or for
-    ``refit`` max(D_min / 4, the spacing)), the rule of :func:`~asrbf_mesh._lod.lod_set`.
-    A scan this cannot be measured on is left to ``lod_set``'s own errors.
-    """
-    import numpy as np
-
-    from ._frame import to_height_field
-    from ._learn import auto_d_min
-
-    try:
-        hf = to_height_field(points, warn_fraction=1.0)  # warnings come from the fit
-    except AsrbfError:
-        return
-    scale = hf.frame.scale[:2]
-    gmean = float(np.sqrt(scale[0] * scale[1]))
-    s0 = hf.spacing * gmean
-    if method == "refit":
-        cfg = FitConfig()
-        s0 = max(auto_d_min(hf.spacing, cfg.error_threshold) / 4.0 * gmean, s0)
-    short = float(scale.min())
-    if not (s0 > 0 and np.isfinite(s0)):
-        return
-    usable = 1
-    while usable < levels and round(short / (s0 * 2.0**usable)) + 1 >= MIN_LEVEL_SAMPLES:
-        usable += 1
-    if levels > usable:
-        n = int(round(short / (s0 * 2.0 ** (levels - 1)))) + 1
-        raise ConfigError(f"levels must be at most {usable} for this scan: level {levels - 1} "
-                          f"would sample its shorter side at {n} points (a useful mesh needs "
-                          f"{MIN_LEVEL_SAMPLES}), got {levels}")
-
-
 def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
         method: str = "resample", compare_qem: bool = False, metro: bool = True,
         seed: int = 0) -> dict[str, Any]:
@@ -295,7 +258,6 @@ def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
     _check_lod(levels=levels, method=method, compare_qem=compare_qem, metro=metro, seed=seed)
     data = load_scan(scan)
     out = check_output_dir(output)
-    _check_levels_fit(data.points, levels, method)
     with atomic_dir(out, LOD_FILES) as tmp:
         lods = lod_set(data, levels=levels, method=method, seed=seed)
         manifest = write_lod_set(data, lods, tmp, compare_qem=compare_qem, metro=metro)
@@ -318,7 +280,9 @@ def metro(mesh: str | os.PathLike, reference: str | os.PathLike, *, samples: int
     from .evaluate._metro import metro as measure
 
     check_seed(seed)
-    a, b = load_scan(mesh), load_scan(reference)
+    # Metro fits nothing: any mesh with a face, any reference with a point
+    a = load_scan(mesh, min_points=1, height_field=False)
+    b = load_scan(reference, min_points=1, height_field=False)
     outs = [x for x in (error_mesh, samples_out) if x]
     for x in outs:
         check_output_path(x, mesh, reference)

@@ -455,6 +455,12 @@ def _scan_rows() -> list[Case]:
                 if case in GEOMETRY_CASES:
                     continue  # a mesh filter takes any shape
                 message = FILTER_SCRIPT_MESSAGES.get(case, message)
+            if slot.startswith("metro/") and case in GEOMETRY_CASES:
+                # Metro fits nothing: any mesh with a face, any reference with a point
+                message = ("is a point set without faces; it must be a mesh"
+                           if slot == "metro/mesh" else None)
+                if message is None:
+                    continue
             if case == "point cloud":
                 if slot == "compare":
                     message = "compare needs a scan with faces"

@@ -12,7 +12,13 @@ import pytest
 from _grids import mm_grid
 
 import asrbf_mesh as am
-from asrbf_mesh._lod import LodLevel, lod_set, network_file_bytes, ply_bytes
+from asrbf_mesh._lod import (
+    MIN_LEVEL_SAMPLES,
+    LodLevel,
+    lod_set,
+    network_file_bytes,
+    ply_bytes,
+)
 from asrbf_mesh.errors import AsrbfError, ConfigError
 from asrbf_mesh.evaluate import QEM_BASELINES, _simplify, write_lod_set
 
@@ -348,7 +354,7 @@ def test_face_map_lod_set(tmp_path) -> None:
 
 
 def test_too_many_levels_are_refused_up_front(scan) -> None:
-    """levels=10**9 ran 90 s, then overflowed; levels past the grid's 8 samples were copies."""
+    """levels=10**9 ran 90 s, then overflowed; levels past the grid's 4 samples were copies."""
 
     t = time.perf_counter()
     with pytest.raises(ConfigError, match=r"^levels must be at most (\d+) for this scan") as info:
@@ -362,6 +368,6 @@ def test_too_many_levels_are_refused_up_front(scan) -> None:
     frame = levels[0].network.frame
     short = float(frame.scale[:2].min())
     coarsest = levels[-1].spacing_abs
-    assert round(short / coarsest) + 1 >= 8
+    assert round(short / coarsest) + 1 >= MIN_LEVEL_SAMPLES
     with pytest.raises(ConfigError, match="levels must be at most"):
         lod_set(scan, levels=10**9, method="refit")

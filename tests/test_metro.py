@@ -153,12 +153,19 @@ def test_metro_measures_small_meshes(tmp_path) -> None:
     assert r.a_to_b is None and r.b_to_a.n_samples == 1
 
 
-@pytest.mark.xfail(reason="asrbf metro loads its inputs with load_scan's fit defaults "
-                          "(min_points=10, height_field=True): cli._cmd_metro should pass "
-                          "min_points=1, height_field=False (cli.py is not in this change)")
 def test_metro_command_measures_small_meshes(tmp_path, capsys) -> None:
     cube = _cube()
     am.save_mesh(cube, tmp_path / "cube.ply")
     am.save_mesh(am.Mesh(cube.vertices * 1.1, cube.faces), tmp_path / "big.ply")
     assert main(["metro", str(tmp_path / "big.ply"), str(tmp_path / "cube.ply"),
                  "--samples", "500"]) == 0
+
+
+def test_metro_command_takes_a_one_point_reference(tmp_path, capsys) -> None:
+    """A one-point reference has no diagonal: the percentages are n/a, never a crash."""
+    cube = _cube()
+    am.save_mesh(cube, tmp_path / "cube.ply")
+    (tmp_path / "one.xyz").write_text("0 0 1\n")
+    assert main(["metro", str(tmp_path / "cube.ply"), str(tmp_path / "one.xyz")]) == 0
+    out = capsys.readouterr().out
+    assert "n/a" in out and "nan" not in out.lower().replace("n/a", "")

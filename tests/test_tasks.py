@@ -144,16 +144,18 @@ def test_lod_refuses_absurd_levels_at_once(capsys, scan: Path, tmp_path: Path) -
 
 
 def test_lod_refuses_levels_coarser_than_the_scan(capsys, tmp_path: Path) -> None:
-    """A 65 x 65 grid: level i samples the short side at 64 / 2**i + 1 points; 8 needed."""
+    """A 65 x 65 grid: level i samples the short side at 64 / 2**i + 1 points; 4 needed."""
     src = am.save_mesh(grid_scan(65), tmp_path / "g.ply")
-    line = one_error(*run(capsys, "lod", src, "-o", tmp_path / "lod", "--levels", "5",
+    t0 = time.perf_counter()
+    line = one_error(*run(capsys, "lod", src, "-o", tmp_path / "lod", "--levels", "6",
                           "--no-metro"))
-    assert "levels must be at most 4 for this scan" in line and "got 5" in line
+    assert "levels must be at most 5 for this scan" in line and "levels=6" in line
+    assert time.perf_counter() - t0 < 5  # refused before the fit
     assert not (tmp_path / "lod").exists()
-    d = tasks.lod(src, tmp_path / "lod", levels=4, metro=False)
-    assert [lv["index"] for lv in d["levels"]] == [0, 1, 2, 3]
-    with pytest.raises(ConfigError, match="at most 4"):
-        tasks.lod(src, tmp_path / "lod", levels=5, method="refit")
+    d = tasks.lod(src, tmp_path / "lod", levels=5, metro=False)
+    assert [lv["index"] for lv in d["levels"]] == [0, 1, 2, 3, 4]
+    with pytest.raises(ConfigError, match="at most"):
+        tasks.lod(src, tmp_path / "lod", levels=6, method="refit")
 
 
 # ----------------------------------------------------------------------------- folders
