@@ -27,10 +27,10 @@ from ._config import FitConfig
 from ._footprint import Footprint
 from ._frame import DuplicatePointsWarning, Frame, HeightField, HeightFieldWarning, to_height_field
 from ._holes import FillResult, HoleInfo, fill_holes, punch_holes
-from ._io import Scan, face_map_path, load_scan, save_mesh
+from ._io import face_map_path, load_scan, save_mesh
 from ._learn import NeuronCapWarning, fit, learn
 from ._lod import LodLevel, lod_set
-from ._mesh import Mesh
+from ._mesh import Mesh, Scan
 from ._network import FitLog, Network, NeuronStats
 from ._stream import fit_stream
 from ._surface import reconstruct

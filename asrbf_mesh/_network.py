@@ -21,7 +21,7 @@ from . import _network_kernels as _nk
 from ._atomic import atomic_path, check_output_path
 from ._config import FitConfig
 from ._frame import Frame
-from ._io import _one_line
+from ._validate import one_line as _one_line
 from .errors import AsrbfError, NetworkFileError
 
 __all__ = ["Network", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
