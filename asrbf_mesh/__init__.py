@@ -26,7 +26,7 @@ if "NUMBA_THREADING_LAYER" not in _os.environ:
 from ._config import FitConfig
 from ._footprint import Footprint
 from ._frame import DuplicatePointsWarning, Frame, HeightField, HeightFieldWarning, to_height_field
-from ._holes import FillResult, HoleInfo, fill_holes, punch_holes
+from ._holes import FillResult, HoleInfo, fill_holes
 from ._io import face_map_path, load_scan, save_mesh
 from ._learn import NeuronCapWarning, fit, learn
 from ._lod import LodLevel, lod_set
@@ -66,7 +66,6 @@ __all__ = [
     "learn",
     "load_scan",
     "lod_set",
-    "punch_holes",
     "reconstruct",
     "save_mesh",
     "to_height_field",

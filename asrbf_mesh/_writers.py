@@ -38,13 +38,8 @@ def _ply_header(vertex: np.ndarray, n_faces: int) -> bytes:
     return ply.header.encode("ascii") + b"\n"
 
 
-def _write_ply(
-    tmp: Path,
-    vertices: np.ndarray,
-    faces: np.ndarray | None,
-    normals: np.ndarray | None,
-    quality: np.ndarray | None,
-) -> None:
+def _write_ply(tmp: Path, vertices: np.ndarray, faces: np.ndarray | None,
+               normals: np.ndarray | None, quality: np.ndarray | None) -> None:
     """Binary little-endian PLY with optional normals and quality."""
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     if normals is not None:
@@ -70,13 +65,8 @@ def _write_ply(
             fh.write(body.tobytes())
 
 
-def _write_obj(
-    tmp: Path,
-    vertices: np.ndarray,
-    faces: np.ndarray | None,
-    normals: np.ndarray | None,
-    quality: np.ndarray | None,
-) -> None:
+def _write_obj(tmp: Path, vertices: np.ndarray, faces: np.ndarray | None,
+               normals: np.ndarray | None, quality: np.ndarray | None) -> None:
     """Wavefront OBJ (``v``, optional ``vn``, ``f`` lines, 1-based)."""
     with open(tmp, "w", encoding="ascii", newline="\n") as fh:
         fh.write("# asrbf-mesh\n")
@@ -91,13 +81,8 @@ def _write_obj(
                 np.savetxt(fh, f1, fmt="f %d %d %d")
 
 
-def _write_off(
-    tmp: Path,
-    vertices: np.ndarray,
-    faces: np.ndarray | None,
-    normals: np.ndarray | None,
-    quality: np.ndarray | None,
-) -> None:
+def _write_off(tmp: Path, vertices: np.ndarray, faces: np.ndarray | None,
+               normals: np.ndarray | None, quality: np.ndarray | None) -> None:
     """ASCII OFF (normals and quality are not stored)."""
     n_faces = 0 if faces is None else len(faces)
     with open(tmp, "w", encoding="ascii", newline="\n") as fh:
@@ -107,13 +92,8 @@ def _write_off(
             np.savetxt(fh, faces, fmt="3 %d %d %d")
 
 
-def _write_stl(
-    tmp: Path,
-    vertices: np.ndarray,
-    faces: np.ndarray | None,
-    normals: np.ndarray | None,
-    quality: np.ndarray | None,
-) -> None:
+def _write_stl(tmp: Path, vertices: np.ndarray, faces: np.ndarray | None,
+               normals: np.ndarray | None, quality: np.ndarray | None) -> None:
     """Binary STL (float32, unit face normals; unused vertices are lost)."""
     assert faces is not None
     tri = vertices[faces]

@@ -23,3 +23,14 @@ def test_hole_benchmark_rows_on_a_smooth_surface() -> None:
     # on a smooth analytic surface the fill is far below 1 % of the diagonal, and below
     # MeshLab's flat Close Holes
     assert ours.rms_pct < 0.1 and ours.rms_pct < rows[2].rms_pct
+
+
+def test_punch_holes_lives_on_the_evaluation_side() -> None:
+    import asrbf_mesh as am
+    from asrbf_mesh import evaluate
+
+    assert "punch_holes" in evaluate.__all__ and "PunchedScan" in evaluate.__all__
+    assert "punch_holes" not in am.__all__ and not hasattr(am, "punch_holes")
+    p = evaluate.punch_holes(grid_scan(franke), count=2, seed=4)
+    assert isinstance(p, evaluate.PunchedScan) and len(p.radii) == 2
+    assert p.scan.n_points + len(p.truth) == grid_scan(franke).n_points

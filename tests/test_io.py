@@ -155,6 +155,28 @@ def test_scan_validation(kwargs, match) -> None:
         Scan(**kwargs)
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"vertices": np.zeros((4, 2))},
+         r"^vertices must be an \(N, 3\) array, got shape \(4, 2\)$"),
+        ({"vertices": [[0, 0, np.inf]] * 3}, "^vertices contain NaN or infinite"),
+        ({"faces": [[0, 1, 9]]}, r"^faces index vertices outside \[0, 4\)$"),
+        ({"faces": [[0, 1, 2, 3]] * 3}, r"^faces must be an \(F, 3\) array, got shape \(3, 4\)$"),
+        ({"faces": [["a", "b", "c"]]}, r"^faces must be an \(F, 3\) array of integers"),
+        ({"vertex_normals": np.zeros((3, 3))}, r"^vertex_normals must have shape \(4, 3\)"),
+        ({"vertex_quality": np.zeros(5)}, r"^vertex_quality must have shape \(4,\)"),
+    ],
+)
+def test_mesh_validation_raises_scan_errors_naming_the_field(kwargs, match) -> None:
+    # these were ValueErrors; a bad mesh is bad data: ScanError, one line
+    args = {"vertices": np.zeros((4, 3)), "faces": [[0, 1, 2]]} | kwargs
+    with pytest.raises(ScanError, match=match) as info:
+        Mesh(**args)
+    assert "\n" not in str(info.value)
+    assert Mesh(np.zeros((4, 3)), []).n_faces == 0
+
+
 def test_scan_error_names_source() -> None:
     with pytest.raises(ScanError, match=r"^x\.ply: 1 face indexes"):
         Scan(np.zeros((3, 3)), [[0, 1, 3]], source="x.ply")
