@@ -218,6 +218,18 @@ def test_cli_fill_holes_json(tmp_path, capsys) -> None:
     assert "input" in capsys.readouterr().err
 
 
+def test_cli_max_hole_size_inf_says_what_a_length_is(tmp_path, capsys) -> None:
+    # used to say "max hole size must be positive, got 'inf'"
+    scan = grid_scan(plane, nx=12, ny=10)
+    src = am.save_mesh(am.Mesh(scan.points, scan.faces), tmp_path / "s.ply")
+    out = tmp_path / "out.ply"
+    assert main(["fill-holes", str(src), "-o", str(out), "--max-hole-size", "inf"]) == 2
+    assert capsys.readouterr().err == (
+        "asrbf: error: max_hole_size must be a finite length > 0 or a percentage like '5%' "
+        "(omit it for no limit), got 'inf'\n")
+    assert not out.exists()
+
+
 @pytest.mark.slow
 def test_face_map_natural_holes_filled_border_kept() -> None:
     scan = am.load_scan(am.face_map_path())

@@ -13,7 +13,8 @@ import numpy as np
 from .._footprint import Footprint
 from .._frame import sampling_spacing
 from .._mesh import Scan
-from ..errors import ScanError
+from .._validate import check_float, check_int, check_seed
+from ..errors import ConfigError, ScanError
 
 __all__ = ["PunchedScan", "punch_holes"]
 
@@ -39,8 +40,23 @@ def punch_holes(scan: Scan, *, count: int = 5, radius_rel: tuple[float, float] =
     Raises
     ------
     ScanError
-        If ``count`` such disks cannot be placed.
+        If ``scan`` is not a Scan, or ``count`` such disks cannot be placed.
+    ConfigError
+        If ``count``, ``seed`` or ``max_tries`` is not an integer in range, or
+        ``radius_rel`` not two numbers ``0 < low <= high``.
     """
+    if not isinstance(scan, Scan):
+        raise ScanError(f"scan must be a Scan, got {type(scan).__name__}")
+    count = check_int(count, "count", 1)
+    seed = check_seed(seed)
+    max_tries = check_int(max_tries, "max_tries", 1)
+    try:
+        lo, hi = radius_rel
+    except (TypeError, ValueError):
+        raise ConfigError(f"radius_rel must be two numbers (low, high), "
+                          f"got {radius_rel!r}") from None
+    lo = check_float(lo, "radius_rel[0]", low=0.0, low_open=True)
+    check_float(hi, "radius_rel[1]", low=lo)
     rng = np.random.default_rng(seed)
     xy = np.ascontiguousarray(scan.points[:, :2])
     spacing = sampling_spacing(xy)
@@ -65,7 +81,8 @@ def punch_holes(scan: Scan, *, count: int = 5, radius_rel: tuple[float, float] =
         centres.append(c)
         radii.append(r)
     if len(centres) < count:
-        raise ScanError(f"could place only {len(centres)} of {count} interior disks")
+        raise ScanError(f"{scan.source or 'scan'}: could place only {len(centres)} of "
+                        f"{count} interior disks")
     cen = np.array(centres)
     rad = np.array(radii)
     d = np.linalg.norm(xy[:, None, :] - cen[None], axis=2)
