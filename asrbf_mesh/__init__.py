@@ -26,11 +26,11 @@ if "NUMBA_THREADING_LAYER" not in _os.environ:
 from ._config import FitConfig
 from ._footprint import Footprint
 from ._frame import DuplicatePointsWarning, Frame, HeightField, HeightFieldWarning, to_height_field
-from ._holes import FillResult, HoleInfo, PunchedScan, fill_holes, punch_holes
-from ._io import Scan, face_map_path, load_scan, save_mesh
+from ._holes import FillResult, HoleInfo, fill_holes
+from ._io import face_map_path, load_scan, save_mesh
 from ._learn import LearnedState, NeuronCapWarning, fit, learn
 from ._lod import LodLevel, lod_set
-from ._mesh import Mesh
+from ._mesh import Mesh, Scan
 from ._network import FitInfo, FitLog, Network, NeuronStats
 from ._stream import fit_stream
 from ._surface import reconstruct
@@ -59,7 +59,6 @@ __all__ = [
     "NetworkFileError",
     "NeuronCapWarning",
     "NeuronStats",
-    "PunchedScan",
     "Scan",
     "ScanError",
     "face_map_path",
@@ -69,7 +68,6 @@ __all__ = [
     "learn",
     "load_scan",
     "lod_set",
-    "punch_holes",
     "reconstruct",
     "save_mesh",
     "to_height_field",

@@ -10,10 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
-from scipy.spatial import Delaunay
+from scipy.spatial import Delaunay, QhullError
 
 from . import _holes_kernels as _hk
-from .errors import AsrbfError
+from .errors import ScanError
 
 __all__ = ["Footprint", "point_cloud_faces", "signed_areas"]
 
@@ -29,9 +29,13 @@ def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) 
     """Triangulate a bare point cloud's footprint: Delaunay in xy without long edges.
 
     Triangles with an edge longer than ``max_edge * spacing`` are dropped (an alpha
-    shape in spirit), so gaps wider than a few samples stay open.
+    shape in spirit), so gaps wider than a few samples stay open. Points that span no
+    area (fewer than 3, or all on one line) give no triangles.
     """
-    tri = Delaunay(xy).simplices.astype(np.int64)
+    try:
+        tri = Delaunay(xy).simplices.astype(np.int64)
+    except (QhullError, ValueError):
+        return np.zeros((0, 3), dtype=np.int64)
     p = xy[tri]
     edges = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
     tri = tri[edges <= max_edge * spacing]
@@ -93,7 +97,8 @@ class Footprint:
         lo = xy.min(axis=0) - 3 * cell
         nx, ny = (np.ceil((xy.max(axis=0) + 3 * cell - lo) / cell).astype(int) + 1)
         if nx * ny > 200_000_000:
-            raise AsrbfError("the scan's footprint raster would be too large (spacing too small?)")
+            raise ScanError("the scan's footprint raster would be too large "
+                            "(spacing too small?)")
         cov = _hk.coverage(xy, faces, lo, cell, int(nx), int(ny))
         labels, _ = ndimage.label(~cov, structure=np.ones((3, 3), bool))
         outside = frozenset(np.unique(np.concatenate(

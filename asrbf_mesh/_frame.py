@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._io import _collinear_xy
+from ._mesh import collinear_xy as _collinear_xy
 from .errors import ConfigError, ScanError
 
 __all__ = ["Frame", "HeightField", "HeightFieldWarning", "DuplicatePointsWarning",

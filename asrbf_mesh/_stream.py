@@ -50,7 +50,18 @@ from ._frame import (
 from ._io import check_scan_path
 from ._learn import MIN_POINTS, auto_d_min, fit_info, learn_from, polish_kind
 from ._network import Network
-from ._validate import check_int, check_seed
+from ._readers import (
+    FORMAT_NAMES,
+    TEXT_PROBE,
+    ParseError,
+    check_npy_points,
+    check_text,
+    is_count_line,
+    npy_header,
+    ply_vertex,
+    read_ply_data,
+)
+from ._validate import check_int, check_seed, one_line
 from .errors import ConfigError, ScanError
 
 __all__ = ["fit_stream", "block_order", "open_points", "PointBlocks", "STREAM_FORMATS",
@@ -151,18 +162,14 @@ class _TextBlocks(PointBlocks):
 
 
 def _ply_blocks(path: str, name: str, chunk: int) -> PointBlocks:
-    import plyfile
-
     try:
-        ply = plyfile.PlyData.read(path, mmap="r")
-    except Exception as exc:
-        raise ScanError(f"{name}: cannot read PLY: {str(exc).splitlines()[0]}") from None
-    if "vertex" not in ply:
-        raise ScanError(f"{name}: cannot read PLY: no vertex element")
-    vertex = ply["vertex"]
-    names = vertex.data.dtype.names or ()
-    if not {"x", "y", "z"} <= set(names):
-        raise ScanError(f"{name}: cannot read PLY: the vertex element has no x, y, z")
+        with open(path, "rb") as fh:
+            ply = read_ply_data(fh)
+        vertex = ply_vertex(ply)
+    except ParseError as exc:
+        raise ScanError(f"{name}: cannot read PLY: {exc}") from None
+    except Exception as exc:  # parser boundary: never leak a third-party traceback
+        raise ScanError(f"{name}: cannot read PLY: {one_line(exc)}") from None
     if ply.text or not isinstance(vertex.data, np.memmap):
         raise ScanError(f"{name}: an ASCII PLY (or one with lists before its vertices) "
                         "cannot be streamed: convert it to binary PLY or NPY")
@@ -170,10 +177,15 @@ def _ply_blocks(path: str, name: str, chunk: int) -> PointBlocks:
     return _ArrayBlocks(name, int(data.offset), data.dtype, len(data), chunk, ("x", "y", "z"))
 
 
-def _text_blocks(path: str, name: str, chunk: int) -> PointBlocks:
+def _text_blocks(path: str, name: str, chunk: int, fmt: str) -> PointBlocks:
     offsets, ends, n = [], [], 0
     first = True
     with open(path, "rb") as fh:
+        try:
+            check_text(fh.read(TEXT_PROBE))
+        except ParseError as exc:
+            raise ScanError(f"{name}: cannot read {fmt}: {exc}") from None
+        fh.seek(0)
         pos = 0
         for line in fh:
             start, pos = pos, pos + len(line)
@@ -182,7 +194,7 @@ def _text_blocks(path: str, name: str, chunk: int) -> PointBlocks:
                 continue
             if first:
                 first = False
-                if s.isdigit():  # a leading count line, as load_scan skips it
+                if is_count_line(s):  # a leading count line, as load_scan skips it
                     continue
             if n % chunk == 0:
                 if ends:
@@ -195,37 +207,42 @@ def _text_blocks(path: str, name: str, chunk: int) -> PointBlocks:
     return _TextBlocks(name, offsets, ends, n, chunk)
 
 
+def _npy_blocks(path: str, name: str, chunk: int) -> PointBlocks:
+    try:
+        with open(path, "rb") as fh:
+            shape, fortran, dtype = npy_header(fh)
+            offset = fh.tell()
+        check_npy_points(shape, dtype)
+    except ParseError as exc:
+        raise ScanError(f"{name}: cannot read NPY: {exc}") from None
+    except Exception as exc:
+        raise ScanError(f"{name}: cannot read NPY: {one_line(exc)}") from None
+    if fortran:
+        raise ScanError(f"{name}: an NPY array in Fortran order cannot be streamed: "
+                        "save it in C order (np.save(path, np.ascontiguousarray(a)))")
+    row = np.dtype([("v", dtype, (shape[1],))])
+    return _ArrayBlocks(name, offset, row, shape[0], chunk)
+
+
 def open_points(path: str | os.PathLike[str], chunk: int = DEFAULT_CHUNK) -> PointBlocks:
     """Open a scan file for reading in blocks (formats: :data:`STREAM_FORMATS`).
+
+    The header and format checks are :func:`load_scan`'s (:mod:`asrbf_mesh._readers`).
 
     Raises
     ------
     ScanError
         Missing file, a directory, an empty file, another format, an ASCII PLY, an
-        NPY that is not an (N, >=3) real array.
+        NPY that is not an (N, 3) real array in C order, a binary point list.
     """
     p, name = check_scan_path(path, STREAM_FORMATS,
                               "format {shown} cannot be streamed (load it with load_scan)")
     ext = p.suffix.lower()
     if ext == ".ply":
         return _ply_blocks(str(p), name, chunk)
-    if ext != ".npy":
-        return _text_blocks(str(p), name, chunk)
-    try:
-        with open(p, "rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                    else np.lib.format.read_array_header_2_0)
-            shape, fortran, dtype = read(fh)
-            offset = fh.tell()
-    except Exception as exc:
-        raise ScanError(f"{name}: cannot read NPY: {str(exc).splitlines()[0]}") from None
-    if len(shape) != 2 or shape[1] < 3 or dtype.kind not in "fiu" or fortran:
-        raise ScanError(f"{name}: cannot read NPY: expected an (N, 3) or (N, >=3) real "
-                        f"array in C order, got shape {shape} of {dtype}"
-                        f"{' (Fortran order)' if fortran else ''}")
-    row = np.dtype([("v", dtype, (shape[1],))])
-    return _ArrayBlocks(name, offset, row, shape[0], chunk)
+    if ext == ".npy":
+        return _npy_blocks(str(p), name, chunk)
+    return _text_blocks(str(p), name, chunk, FORMAT_NAMES[ext])
 
 
 # --------------------------------------------------------------------------- order
@@ -268,7 +285,7 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
     Parameters
     ----------
     path : str or os.PathLike
-        Points file: NPY (N, >=3), binary PLY (vertex x, y, z) or XYZ text.
+        Points file: NPY (N, 3), binary PLY (vertex x, y, z) or XYZ text.
     config : FitConfig, optional
         As :func:`asrbf_mesh.fit`; ``polish`` must be ``"weights"`` or ``"none"``
         (the full polish needs every point at once).

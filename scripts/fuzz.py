@@ -246,9 +246,11 @@ def _instrument(atheris) -> None:
     from asrbf_mesh import _config as config
     from asrbf_mesh import _frame as frame
     from asrbf_mesh import _io as io
+    from asrbf_mesh import _mesh as mesh
     from asrbf_mesh import _network as network
+    from asrbf_mesh import _readers as readers
 
-    for module in (io, network, frame, config, plyfile):
+    for module in (io, readers, mesh, network, frame, config, plyfile):
         for obj in list(vars(module).values()):
             if getattr(obj, "__module__", None) != module.__name__:
                 continue

@@ -20,10 +20,10 @@ import asrbf_mesh as am
 
 CHILD = r"""
 import sys, time
-import asrbf_mesh._io as io
+import asrbf_mesh._writers as io
 from asrbf_mesh.cli import main
 
-real = io._WRITERS[".ply"]
+real = io.WRITERS[".ply"]
 
 def slow(path, *args, **kwargs):
     real(path, *args, **kwargs)
@@ -32,7 +32,7 @@ def slow(path, *args, **kwargs):
     print("writing", path, flush=True)
     time.sleep(120)
 
-io._WRITERS[".ply"] = slow
+io.WRITERS[".ply"] = slow
 sys.exit(main(sys.argv[1:]))
 """
 

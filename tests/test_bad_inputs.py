@@ -187,6 +187,11 @@ def _non_finite(env: Env, value: str) -> Path:
     return _text(env.root / f"{value}.xyz", "\n".join(lines) + "\n")
 
 
+def _npy(path: Path, array: np.ndarray) -> Path:
+    np.save(path, array)
+    return path
+
+
 def _collinear(env: Env) -> Path:
     t = np.linspace(0.0, 80.0, 60)
     return _xyz(env.root / "line.xyz", np.c_[100 + t, 20 + 0.75 * t, 5 + np.sin(t / 9)])
@@ -210,6 +215,10 @@ SCAN_CASES: dict[str, Callable[[Env], Path]] = {
         e, "fewer.ply", lambda b: _header_count(b, "face", 100)),
     "unknown extension": lambda e: _text(e.root / "scan.abc", "1 2 3\n"),
     "non-numeric token": _with_bad_token,
+    "binary point list": lambda e: _bytes(e.root / "binary.pts",
+                                          scan_points().astype("<f8").tobytes()),
+    "NPY with 4 columns": lambda e: _npy(e.root / "four.npy",
+                                         np.c_[scan_points(), np.ones(len(scan_points()))]),
     "NaN coordinate": lambda e: _non_finite(e, "nan"),
     "inf coordinate": lambda e: _non_finite(e, "inf"),
     "1 point": lambda e: _text(e.root / "one.xyz", "100 20 5\n"),
@@ -236,6 +245,10 @@ SCAN_MESSAGES = {
     "PLY header: fewer faces": "the header's counts do not match the data",
     "unknown extension": "unknown scan format '.abc'",
     "non-numeric token": "cannot read XYZ: line 31: 'abc' is not a number",
+    "binary point list": "cannot read PTS: not a text point file (binary data)",
+    "NPY with 4 columns": ("cannot read NPY: array has shape (256, 4), expected (N, 3): one "
+                           "x, y, z row per point (save only those columns, e.g. "
+                           "np.save(path, a[:, :3]))"),
     "NaN coordinate": "1 point has NaN or infinite coordinates",
     "inf coordinate": "1 point has NaN or infinite coordinates",
     "1 point": "only 1 point, at least 10 needed",
@@ -424,6 +437,7 @@ FILTER_SCRIPT_MESSAGES = {
     "truncated PLY": "cannot load (",  # ... Unexpected EOF)
     "PLY header: more vertices": "cannot load (",
     "unknown extension": "cannot load (Unknown format for load: abc)",
+    "NPY with 4 columns": "cannot load (Unknown format for load: npy)",
     "faces out of range": "cannot load (",  # ... Bad vertex index in face)
 }
 

@@ -9,11 +9,12 @@ import pytest
 from _grids import height_grid
 
 import asrbf_mesh as am
-from asrbf_mesh._holes import fill_holes, parse_size, punch_holes
+from asrbf_mesh._holes import fill_holes
 from asrbf_mesh._igl import boundary_loops, point_mesh_distance
 from asrbf_mesh._surface import grid_faces
 from asrbf_mesh.cli import main
-from asrbf_mesh.errors import AsrbfError
+from asrbf_mesh.errors import ConfigError, ScanError
+from asrbf_mesh.evaluate import punch_holes
 
 
 def grid_scan(fn, nx=70, ny=50, size=(70.0, 50.0), seed=0) -> am.Scan:
@@ -135,18 +136,65 @@ def test_harmonic_blend_of_the_full_network_stays_available(punched) -> None:
     lit = fill_holes(p.scan, res.network, blend="harmonic", lowpass_rel=None, progress=False)
     assert lit.holes_filled == 3
     assert point_mesh_distance(p.truth, lit.mesh).mean() < 1.0
-    with pytest.raises(AsrbfError, match="blend must be one of"):
+    with pytest.raises(ConfigError, match="^blend must be one of"):
         fill_holes(p.scan, res.network, blend="cubic")
 
 
-def test_parse_size() -> None:
-    assert parse_size("5%", 200.0) == 10.0
-    assert parse_size("2.5", 200.0) == 2.5
-    assert parse_size(None, 1.0) is None
-    with pytest.raises(AsrbfError, match="percentage"):
-        parse_size("big", 1.0)
-    with pytest.raises(AsrbfError, match="positive"):
-        parse_size("-3", 1.0)
+@pytest.mark.parametrize(("kwargs", "match"), [
+    # "inf" used to say "must be positive": it is positive, but no length
+    ({"max_hole_size": "inf"}, r"^max_hole_size must be a finite length > 0 or a percentage "
+                               r"like '5%' \(omit it for no limit\), got 'inf'$"),
+    ({"max_hole_size": float("inf")}, "^max_hole_size must be a finite length"),
+    ({"max_hole_size": "big"}, "^max_hole_size must be a finite length"),
+    ({"max_hole_size": "-3"}, "^max_hole_size must be a finite length"),
+    ({"max_hole_size": "150%"}, r"^max_hole_size must be a percentage in \(0, 100\]"),
+    ({"blend": None}, "^blend must be one of"),
+    ({"lowpass_rel": 0.0}, "^lowpass_rel must be a finite number > 0.0, got 0.0$"),
+    ({"lowpass_rel": float("nan")}, "^lowpass_rel must be a finite number"),
+    ({"seed": -1}, "^seed must be an integer >= 0, got -1$"),
+    ({"net": "net.asrbf"}, "^net must be a Network"),
+])
+def test_bad_parameters_raise_config_errors_naming_them(kwargs, match) -> None:
+    scan = grid_scan(plane, nx=12, ny=10)
+    kwargs = {"net": None} | kwargs
+    with pytest.raises(ConfigError, match=match) as info:  # before any fit: no network needed
+        fill_holes(scan, kwargs.pop("net"), progress=False, **kwargs)
+    assert "\n" not in str(info.value)
+
+
+def test_max_hole_size_takes_lengths_and_percentages(punched) -> None:
+    _, _, p, res = punched
+    diag = p.scan.bbox_diagonal
+    for value in ("5%", 0.05 * diag, str(0.05 * diag), None):
+        again = fill_holes(p.scan, res.network, max_hole_size=value, progress=False)
+        assert [h.filled for h in again.holes] == [h.size_abs <= 0.05 * diag or value is None
+                                                   for h in again.holes]
+
+
+def test_an_array_of_points_is_filled_as_a_point_cloud() -> None:
+    # am.fill_holes(array, net) used to raise AttributeError ('numpy.ndarray' has no 'points')
+    scan = grid_scan(paraboloid)
+    p = punch_holes(scan, count=2, radius_rel=(0.05, 0.07), seed=5)
+    cloud = fill_holes(am.Scan(p.scan.points), seed=0, progress=False)
+    res = am.fill_holes(np.array(p.scan.points), cloud.network)
+    np.testing.assert_array_equal(res.mesh.vertices, cloud.mesh.vertices)
+    np.testing.assert_array_equal(res.mesh.faces, cloud.mesh.faces)
+    as_list = am.fill_holes(p.scan.points.tolist(), cloud.network)
+    np.testing.assert_array_equal(as_list.mesh.faces, cloud.mesh.faces)
+    mesh = am.fill_holes(am.Mesh(p.scan.points, p.scan.faces), cloud.network)
+    assert mesh.holes_filled == 2 and mesh.mesh.n_faces > p.scan.n_faces
+
+
+@pytest.mark.parametrize(("scan", "match"), [
+    (np.zeros((10, 2)), r"^scan must be an \(N, 3\) array, got shape \(10, 2\)$"),
+    ("scan.ply", "^scan must be a Scan, a Mesh or an .* got the path 'scan.ply': load it"),
+    (object(), r"^scan must be an \(N, 3\) array of numbers, got object$"),
+    (np.array([[0.0, 0, np.nan]] * 5), "^scan contain NaN or infinite"),
+])
+def test_bad_scans_raise_one_line_scan_errors_naming_scan(franke_net, scan, match) -> None:
+    with pytest.raises(ScanError, match=match) as info:
+        am.fill_holes(scan, franke_net)
+    assert "\n" not in str(info.value)
 
 
 def test_cli_fill_holes_json(tmp_path, capsys) -> None:
@@ -165,6 +213,18 @@ def test_cli_fill_holes_json(tmp_path, capsys) -> None:
     assert len(back.faces) == len(p.scan.faces) + data["faces_added"]
     assert main(["fill-holes", str(src), "-o", str(src)]) == 2  # never overwrite the input
     assert "input" in capsys.readouterr().err
+
+
+def test_cli_max_hole_size_inf_says_what_a_length_is(tmp_path, capsys) -> None:
+    # used to say "max hole size must be positive, got 'inf'"
+    scan = grid_scan(plane, nx=12, ny=10)
+    src = am.save_mesh(am.Mesh(scan.points, scan.faces), tmp_path / "s.ply")
+    out = tmp_path / "out.ply"
+    assert main(["fill-holes", str(src), "-o", str(out), "--max-hole-size", "inf"]) == 2
+    assert capsys.readouterr().err == (
+        "asrbf: error: max_hole_size must be a finite length > 0 or a percentage like '5%' "
+        "(omit it for no limit), got 'inf'\n")
+    assert not out.exists()
 
 
 @pytest.mark.slow

@@ -20,6 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from asrbf_mesh import _io as scan_io
+from asrbf_mesh import _readers, _writers
 from asrbf_mesh._io import (
     SUPPORTED_MESH_FORMATS,
     SUPPORTED_SCAN_FORMATS,
@@ -131,7 +132,8 @@ def test_scan_empty_faces_become_none() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"points": np.zeros((4, 2))}, r"shape \(N, 3\)"),
+        ({"points": np.zeros((4, 2))}, r"^points must be an \(N, 3\) array, got shape \(4, 2\)"),
+        ({"points": [[0, 0, np.nan]]}, "^points contain NaN or infinite"),
         ({"points": [["a", "b", "c"]]}, "real numbers"),
         (
             {"points": np.zeros((4, 3)), "faces": [[0, 1, 4]]},
@@ -147,6 +149,28 @@ def test_scan_empty_faces_become_none() -> None:
 def test_scan_validation(kwargs, match) -> None:
     with pytest.raises(ScanError, match=match):
         Scan(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"vertices": np.zeros((4, 2))},
+         r"^vertices must be an \(N, 3\) array, got shape \(4, 2\)$"),
+        ({"vertices": [[0, 0, np.inf]] * 3}, "^vertices contain NaN or infinite"),
+        ({"faces": [[0, 1, 9]]}, r"^faces index vertices outside \[0, 4\)$"),
+        ({"faces": [[0, 1, 2, 3]] * 3}, r"^faces must be an \(F, 3\) array, got shape \(3, 4\)$"),
+        ({"faces": [["a", "b", "c"]]}, r"^faces must be an \(F, 3\) array of integers"),
+        ({"vertex_normals": np.zeros((3, 3))}, r"^vertex_normals must have shape \(4, 3\)"),
+        ({"vertex_quality": np.zeros(5)}, r"^vertex_quality must have shape \(4,\)"),
+    ],
+)
+def test_mesh_validation_raises_scan_errors_naming_the_field(kwargs, match) -> None:
+    # these were ValueErrors; a bad mesh is bad data: ScanError, one line
+    args = {"vertices": np.zeros((4, 3)), "faces": [[0, 1, 2]]} | kwargs
+    with pytest.raises(ScanError, match=match) as info:
+        Mesh(**args)
+    assert "\n" not in str(info.value)
+    assert Mesh(np.zeros((4, 3)), []).n_faces == 0
 
 
 def test_scan_error_names_source() -> None:
@@ -608,8 +632,10 @@ def test_load_npy(tmp_path) -> None:
     path = tmp_path / "p.npy"
     np.save(path, pts)
     np.testing.assert_array_equal(load_scan(path).points, pts)
-    np.save(path, np.column_stack([pts, np.ones(len(pts))]).astype(np.float32))
+    np.save(path, pts.astype(np.float32))
     np.testing.assert_allclose(load_scan(path).points, pts)
+    np.save(path, np.asfortranarray(pts))
+    np.testing.assert_array_equal(load_scan(path).points, pts)
     np.save(path, np.rint(pts * 10).astype(np.int16))
     np.testing.assert_array_equal(load_scan(path).points, np.rint(pts * 10))
 
@@ -620,7 +646,7 @@ def test_load_npy(tmp_path) -> None:
         (np.zeros(30), r"shape \(30,\)"),
         (np.zeros((10, 2)), r"shape \(10, 2\)"),
         (np.zeros((10, 3), dtype=complex), "not a real numeric type"),
-        (np.array([[1, 2, 3]] * 10, dtype=object), "allow_pickle"),
+        (np.array([[1, 2, 3]] * 10, dtype=object), "dtype object is not a real numeric"),
     ],
 )
 def test_load_npy_errors(tmp_path, array, match) -> None:
@@ -629,6 +655,42 @@ def test_load_npy_errors(tmp_path, array, match) -> None:
     with pytest.raises(ScanError, match=match) as exc:
         load_scan(path)
     assert_single_line(exc, path)
+
+
+@pytest.mark.parametrize("columns", [4, 6, 2])
+def test_load_npy_refuses_other_column_counts(tmp_path, columns) -> None:
+    # an (N, 4) array (x, y, z, intensity?) used to lose its 4th column without a word
+    path = tmp_path / "four.npy"
+    np.save(path, np.ones((12, columns), dtype=np.float32))
+    with pytest.raises(ScanError, match=rf"^{path}: cannot read NPY: array has shape "
+                                        rf"\(12, {columns}\), expected \(N, 3\)") as exc:
+        load_scan(path)
+    assert_single_line(exc, path)
+
+
+@pytest.mark.parametrize("ext", [".pts", ".xyz", ".txt"])
+@pytest.mark.parametrize("data", [
+    np.random.default_rng(0).bytes(4000),              # random bytes
+    np.arange(300, dtype="<f8").tobytes(),             # a binary array named .pts
+    b"12\n" + np.random.default_rng(1).bytes(40),     # text header, binary body
+])
+def test_binary_point_list_is_named_as_such(tmp_path, ext, data) -> None:
+    # used to say "line 1: expected x y z, got 1 value"
+    path = tmp_path / f"bin{ext}"
+    path.write_bytes(data)
+    fmt = ext[1:].upper()
+    with pytest.raises(ScanError, match=rf"^{path}: cannot read {fmt}: not a text point file "
+                                        r"\(binary data\)$") as exc:
+        load_scan(path)
+    assert_single_line(exc, path)
+
+
+def test_text_point_list_with_a_few_odd_bytes_still_loads(tmp_path) -> None:
+    pts = grid_points()
+    path = tmp_path / "latin.pts"
+    body = "\n".join(f"{x} {y} {z}" for x, y, z in pts)
+    path.write_bytes("# scanné à Zürich\n".encode("latin-1") + body.encode())
+    np.testing.assert_allclose(load_scan(path).points, pts)
 
 
 def test_extension_is_case_insensitive(tmp_path) -> None:
@@ -814,7 +876,7 @@ def test_parser_exceptions_are_wrapped(tmp_path, monkeypatch) -> None:
     def broken(path):
         raise RuntimeError("some\n  internal detail")
 
-    monkeypatch.setitem(scan_io._READERS, ".ply", broken)
+    monkeypatch.setitem(_readers.READERS, ".ply", broken)
     path = tmp_path / "x.ply"
     path.write_text("ply\n")
     with pytest.raises(ScanError, match=r"x\.ply: cannot read PLY: some internal detail$") as exc:
@@ -951,7 +1013,7 @@ def test_save_failure_leaves_no_temp_and_keeps_target(tmp_path, mesh, monkeypatc
         Path(tmp).write_text("partial")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setitem(scan_io._WRITERS, ".off", boom)
+    monkeypatch.setitem(_writers.WRITERS, ".off", boom)
     with pytest.raises(ScanError, match=r"keep\.off: cannot write \(No space left on device\)"):
         save_mesh(mesh, target)
     assert target.read_text() == "old"

@@ -12,6 +12,7 @@ from __future__ import annotations
 from ._holes_bench import HOLE_METHODS, HoleRow, hole_benchmark
 from ._lod_report import QEM_BASELINES, write_lod_set
 from ._metro import Direction, MetroResult, metro
+from ._punch import PunchedScan, punch_holes
 from ._report import Comparison, compare, load_compare, write_compare, write_summary
 from ._som import SomComparison, SomMap, compare_som, network_vertices, som_grid, train_som
 
@@ -22,6 +23,7 @@ __all__ = [
     "Direction",
     "HoleRow",
     "MetroResult",
+    "PunchedScan",
     "SomComparison",
     "SomMap",
     "compare",
@@ -30,6 +32,7 @@ __all__ = [
     "load_compare",
     "metro",
     "network_vertices",
+    "punch_holes",
     "som_grid",
     "train_som",
     "write_compare",

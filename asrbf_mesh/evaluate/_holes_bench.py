@@ -1,6 +1,6 @@
 """Ground-truth hole benchmark: punch disks, fill them by several methods, measure.
 
-Interior disks are removed from a scan (:func:`asrbf_mesh._holes.punch_holes`) and
+Interior disks are removed from a scan (:func:`~asrbf_mesh.evaluate.punch_holes`) and
 their points kept as the truth; each method fills the holed scan, and the distance of
 every truth point to the filled surface is reported in % of the scan's bounding-box
 diagonal. Methods: ours (:func:`~asrbf_mesh._holes.fill_holes`, fit included), a
@@ -17,11 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
-from .._holes import FillResult, PunchedScan, fill_holes, punch_holes
+from .._holes import FillResult, fill_holes
 from .._igl import point_mesh_distance
-from .._io import Scan
-from .._mesh import Mesh
+from .._mesh import Mesh, Scan
 from . import _meshlab
+from ._punch import PunchedScan, punch_holes
 
 __all__ = ["HOLE_METHODS", "HoleRow", "hole_benchmark"]
 
