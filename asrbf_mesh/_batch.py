@@ -22,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import sys
 import time
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
@@ -32,7 +31,8 @@ from typing import Any
 
 from ._atomic import atomic_path, check_output_dir
 from ._io import SUPPORTED_SCAN_FORMATS
-from ._validate import jsonable, strict_json
+from ._validate import check_int, jsonable, strict_json
+from ._validate import progress as progress_bar
 from .errors import AsrbfError, ConfigError
 
 __all__ = ["TASKS", "Job", "expand_inputs", "parse_seeds", "plan_jobs", "run_job",
@@ -302,20 +302,14 @@ def run_batch(jobs: Sequence[Job], *, workers: int = 2, scheduler: str | None = 
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ConfigError(f"workers must be an integer >= 1, got {workers!r}")
-    if isinstance(tasks_per_worker, bool) or not isinstance(tasks_per_worker, int) \
-            or tasks_per_worker < 1:
-        raise ConfigError(f"tasks_per_worker must be an integer >= 1, got {tasks_per_worker!r}")
+    check_int(tasks_per_worker, "tasks_per_worker", 1)
     t0 = time.perf_counter()
     for parent in sorted({Path(j.out_dir).parent for j in jobs}):
         check_output_dir(parent)
     records: list[dict[str, Any] | None] = [_done(j) if skip_existing else None for j in jobs]
     todo = [i for i, r in enumerate(records) if r is None]
-    bar = None
-    if progress or (progress is None and sys.stderr.isatty()):
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), unit="file",
-                   desc="batch", file=sys.stderr)
+    bar = progress_bar(len(jobs), progress, "batch", unit="file", delay=0.0,
+                       initial=len(jobs) - len(todo))
     restarts = 0
     closers: list[Any] = []
     if client is None and todo:
@@ -325,7 +319,7 @@ def run_batch(jobs: Sequence[Job], *, workers: int = 2, scheduler: str | None = 
             restarts = _run(client, jobs, todo, records, tasks_per_worker, bar)
     finally:
         if bar is not None:
-            bar.close()
+            bar.close()  # type: ignore[attr-defined]
         for c in closers:
             with contextlib.suppress(Exception):
                 c.close()
@@ -360,7 +354,7 @@ def _run(client: Any, jobs: Sequence[Job], todo: list[int],
                    "result": None, "seconds": None, "worker": None}
         records[i] = rec
         if bar is not None:
-            bar.update(1)
+            bar(1)
         addr = rec.get("worker")
         nxt = next(pending, None)
         if addr is not None:

@@ -39,7 +39,7 @@ from ._learn import auto_d_min, fit
 from ._mesh import Mesh
 from ._network import Network
 from ._surface import reconstruct
-from ._validate import check_int, check_seed
+from ._validate import check_bool, check_int, check_seed
 from .errors import ConfigError, ScanError
 
 __all__ = [
@@ -328,8 +328,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     seed = check_seed(seed)
     if net is not None and not isinstance(net, Network):
         raise ConfigError(f"net must be a Network, got {type(net).__name__}")
-    if not isinstance(footprint, bool):
-        raise ConfigError(f"footprint must be True or False, got {footprint!r}")
+    check_bool(footprint, "footprint")
     if d_mins is not None and method != "refit":
         raise ConfigError("d_mins applies to method 'refit' only")
     sc = _as_scan(scan)

@@ -24,6 +24,7 @@ __all__ = [
     "check_int",
     "check_seed",
     "check_float",
+    "check_bool",
     "check_choice",
     "check_points",
     "parse_length",
@@ -125,6 +126,20 @@ def check_float(value: Any, name: str, *, low: float | None = None, high: float 
     if bad:
         raise ConfigError(f"{name} must be {want}, got {value!r}")
     return v
+
+
+def check_bool(value: Any, name: str, *, allow_none: bool = False) -> bool | None:
+    """Return ``value`` if it is True or False (or None when ``allow_none``), else ConfigError.
+
+    Examples
+    --------
+    >>> check_bool(True, "metro")
+    True
+    """
+    if (value is None and allow_none) or isinstance(value, bool):
+        return value
+    raise ConfigError(f"{name} must be True or False{' or None' if allow_none else ''}, "
+                      f"got {value!r}")
 
 
 def check_choice(value: Any, name: str, choices: Sequence[str]) -> str:

@@ -32,7 +32,7 @@ from ._io import load_scan, save_mesh
 from ._lod import METHODS as LOD_METHODS
 from ._network import FORMAT_VERSION, Network
 from ._surface import FOOTPRINT_MODES
-from ._validate import check_choice, check_float, check_int, check_seed, jsonable
+from ._validate import check_bool, check_choice, check_float, check_int, check_seed, jsonable
 from .errors import AsrbfError, ConfigError
 
 __all__ = ["COMMANDS", "check_options", "compare", "fill_holes", "filter_script", "fit",
@@ -49,15 +49,11 @@ _LEARNING_FIELDS = tuple(f.name for f in dataclasses.fields(FitConfig))
 
 
 def _check_bool(value: Any, name: str) -> bool:
-    if not isinstance(value, bool):
-        raise ConfigError(f"{name} must be True or False, got {value!r}")
-    return value
+    return bool(check_bool(value, name))
 
 
 def _progress(value: Any) -> bool | None:
-    if value is not None:
-        _check_bool(value, "progress")
-    return value
+    return check_bool(value, "progress", allow_none=True)
 
 
 # --------------------------------------------------------------------------- fit
