@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._mesh import collinear_xy as _collinear_xy
+from ._validate import check_points
 from .errors import ConfigError, ScanError
 
 __all__ = ["Frame", "HeightField", "HeightFieldWarning", "DuplicatePointsWarning",
@@ -258,11 +259,7 @@ def to_height_field(points: np.ndarray, *, view_axis: ViewAxis = "z",
     >>> bool(np.allclose(hf.frame.to_world(np.c_[hf.xy, hf.z]), p))
     True
     """
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ScanError(f"points must have shape (N, 3), got {pts.shape}")
-    if not np.all(np.isfinite(pts)):
-        raise ScanError("points contain NaN or infinite coordinates")
+    pts = check_points(points, "points", min_points=0)
     rot = _rotation(pts, view_axis)
     local = pts @ rot
     frame = frame_from_bounds(rot, local.min(axis=0), local.max(axis=0),

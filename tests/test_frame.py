@@ -122,7 +122,7 @@ def test_zero_extent_on_the_view_axis_frame(syn) -> None:
 
 
 @pytest.mark.parametrize(("pts", "match"), [
-    (np.zeros((10, 2)), r"shape \(N, 3\)"),
+    (np.zeros((10, 2)), r"an \(N, 3\) array, got shape \(10, 2\)"),
     (np.array([[0.0, 0.0, 0.0], [1.0, 1.0, np.nan], [0.0, 1.0, 0.0]]), "NaN"),
     (np.array([[0.0, 0.0, 0.0], [1.0, 1.0, np.inf], [0.0, 1.0, 0.0]]), "NaN or infinite"),
 ])
