@@ -32,7 +32,7 @@ from ._learn import LearnedState, NeuronCapWarning, fit, learn
 from ._lod import LodLevel, lod_set
 from ._mesh import Mesh, Scan
 from ._network import FitInfo, FitLog, Network, NeuronStats
-from ._stream import fit_stream
+from ._stream import block_order, fit_stream
 from ._surface import reconstruct
 from ._version import __version__
 from .errors import AsrbfError, ConfigError, FitError, NetworkFileError, ScanError
@@ -64,6 +64,7 @@ __all__ = [
     "face_map_path",
     "fill_holes",
     "fit",
+    "block_order",
     "fit_stream",
     "learn",
     "load_scan",
