@@ -242,7 +242,7 @@ class _OptionsParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         hint = " (batch sets it: use --seeds / -o)" if any(
-            f in message for f in ("--seed", "-o", "--output")) else ""
+            f in message.split() for f in ("--seed", "-o", "--output")) else ""
         raise ConfigError(f"--task-options: {message}{hint}")
 
     def exit(self, status: int = 0, message: str | None = None) -> NoReturn:
@@ -516,9 +516,28 @@ def _exit_code(exc: BaseException) -> int | None:
     return None
 
 
+def _flags(parser: argparse.ArgumentParser, command: str | None) -> dict[str, str]:
+    """Map the options of sub-command ``command`` to their flags (``seed`` -> ``--seed``)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction) and command in action.choices:
+            return {a.dest: a.option_strings[-1] for a in action.choices[command]._actions
+                    if a.option_strings and a.dest != "help"}
+    return {}
+
+
+def _named_as_flag(exc: ConfigError, flags: dict[str, str]) -> ConfigError:
+    """Name a parameter the way the command line spells it: ``seed`` -> ``--seed``."""
+    text = str(exc)
+    first = text.split(" ", 1)[0]
+    if first in flags and " " in text:
+        return ConfigError(f"{flags[first]} {text.split(' ', 1)[1]}")
+    return exc
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``asrbf`` command; returns the exit code."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     handler = None
     if threading.current_thread() is threading.main_thread():
         handler = signal.signal(signal.SIGTERM, _terminate)
@@ -527,6 +546,8 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = _show_warning
             return int(args.run(args))
     except (Exception, KeyboardInterrupt, _Terminated) as exc:
+        if type(exc) is ConfigError:
+            exc = _named_as_flag(exc, _flags(parser, getattr(args, "command", None)))
         code = _exit_code(exc)
         if code is None:
             raise

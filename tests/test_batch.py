@@ -187,7 +187,7 @@ def test_cli_batch(scans, tmp_path) -> None:
                           "-o", str(out), "--seeds", "x"], capture_output=True, text=True,
                          timeout=300)
     assert bad.returncode == 2
-    assert bad.stderr.strip() == "asrbf: error: seeds must look like 0, 0,3,5 or 0-7; got 'x'"
+    assert bad.stderr.strip() == "asrbf: error: --seeds must look like 0, 0,3,5 or 0-7; got 'x'"
 
 
 @pytest.mark.parametrize(("task", "options", "message"), [

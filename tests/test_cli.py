@@ -339,3 +339,16 @@ def test_demo_on_the_face_map(capsys, tmp_path: Path) -> None:
     full = am.load_scan(out / "face_full.ply")
     assert 0 < fp.n_faces < full.n_faces
     assert "face range map" in stdout
+
+
+def test_errors_name_parameters_by_their_flags(tmp_path, capsys) -> None:
+    """A bad option is named the way it was typed (--max-hole-size), not by its Python name."""
+    from asrbf_mesh.cli import main
+
+    scan = tmp_path / "s.xyz"
+    scan.write_text("".join(f"{x} {y} {x * y}\n" for x in range(5) for y in range(5)))
+    assert main(["fill-holes", str(scan), "-o", str(tmp_path / "o.ply"),
+                 "--max-hole-size", "inf"]) == 2
+    assert capsys.readouterr().err.startswith("asrbf: error: --max-hole-size must be")
+    assert main(["fit", str(scan), "-o", str(tmp_path / "n.asrbf"), "--seed", "-1"]) == 2
+    assert capsys.readouterr().err == "asrbf: error: --seed must be an integer >= 0, got -1\n"

@@ -222,7 +222,7 @@ def test_cli_max_hole_size_inf_says_what_a_length_is(tmp_path, capsys) -> None:
     out = tmp_path / "out.ply"
     assert main(["fill-holes", str(src), "-o", str(out), "--max-hole-size", "inf"]) == 2
     assert capsys.readouterr().err == (
-        "asrbf: error: max_hole_size must be a finite length > 0 or a percentage like '5%' "
+        "asrbf: error: --max-hole-size must be a finite length > 0 or a percentage like '5%' "
         "(omit it for no limit), got 'inf'\n")
     assert not out.exists()
 
