@@ -184,13 +184,15 @@ def run_job(job: Job) -> dict[str, Any]:
     _pin_threads()
     t0 = time.perf_counter()
     try:
-        worker = __import__("distributed").get_worker().address
+        w = __import__("distributed").get_worker()
+        worker, worker_name = w.address, w.name
     except (ImportError, ValueError):
-        worker = None
+        worker = worker_name = None
     import numba
 
     record: dict[str, Any] = {"input": job.path, "task": job.task, "seed": job.seed,
-                              "out_dir": job.out_dir, "worker": worker, "pid": os.getpid(),
+                              "out_dir": job.out_dir, "worker": worker,
+                              "worker_name": worker_name, "pid": os.getpid(),
                               "numba_threads": numba.get_num_threads()}
     try:
         Path(job.out_dir).mkdir(parents=True, exist_ok=True)
@@ -351,11 +353,11 @@ def _run(client: Any, jobs: Sequence[Job], todo: list[int],
                    "out_dir": jobs[i].out_dir, "status": "error", "outputs": [],
                    "error": f"worker lost: {type(exc).__name__}: "
                             f"{str(exc).splitlines()[0] if str(exc) else ''}",
-                   "result": None, "seconds": None, "worker": None}
+                   "result": None, "seconds": None, "worker": None, "worker_name": None}
         records[i] = rec
         if bar is not None:
             bar(1)
-        addr = rec.get("worker")
+        addr, name = rec.get("worker"), rec.get("worker_name")
         nxt = next(pending, None)
         if addr is not None:
             runs[addr] = runs.get(addr, 0) + 1
@@ -365,7 +367,10 @@ def _run(client: Any, jobs: Sequence[Job], todo: list[int],
                     restarts += 1
                 runs.pop(addr, None)
         if nxt is not None:
-            f = client.submit(run_job, jobs[nxt], pure=False)
+            # to the worker just freed (by name: a restarted worker keeps its name, not its
+            # address), so that a worker due for a restart never picks up a task before it
+            where = {} if name is None else {"workers": [name], "allow_other_workers": True}
+            f = client.submit(run_job, jobs[nxt], pure=False, **where)
             futures[f] = nxt
             queue.add(f)
     return restarts

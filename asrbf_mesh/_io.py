@@ -1,10 +1,10 @@
 """Reading range scans and writing triangle meshes: the front of the file formats.
 
 :func:`load_scan` turns a scan file (PLY, OBJ, OFF, STL, XYZ/PTS/TXT point lists or
-NPY arrays) into an immutable :class:`~asrbf_mesh._mesh.Scan`: float64 points, optional
+NPY arrays) into an immutable :class:`~asrbf_mesh.Scan`: float64 points, optional
 triangles, and the range-grid shape when the file carried one (Stanford ``range_grid``
 PLY files are triangulated the way MeshLab does it). :func:`save_mesh` writes a
-:class:`~asrbf_mesh._mesh.Mesh` as binary PLY, OBJ, OFF or binary STL, atomically.
+:class:`~asrbf_mesh.Mesh` as binary PLY, OBJ, OFF or binary STL, atomically.
 The parsers are in :mod:`asrbf_mesh._readers`, the writers in :mod:`asrbf_mesh._writers`.
 
 Every problem with an input file surfaces as a one-line

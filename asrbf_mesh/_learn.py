@@ -11,7 +11,7 @@ Each observation ``(x_n, z_n)`` of a random replay of the scan goes through:
 
 The loop runs in compiled code (:mod:`asrbf_mesh._learn_kernels`); this module owns
 the state, feeds it chunk by chunk, grows its arrays, shows progress and builds
-the :class:`~asrbf_mesh._network.Network`.
+the :class:`~asrbf_mesh.Network`.
 
 References
 ----------

@@ -218,7 +218,7 @@ class Scan:
         return float(np.linalg.norm(np.ptp(self.points, axis=0)))
 
     def to_mesh(self) -> Mesh:
-        """Return the scan as a :class:`~asrbf_mesh._mesh.Mesh` (arrays are shared).
+        """Return the scan as a :class:`~asrbf_mesh.Mesh` (arrays are shared).
 
         Returns
         -------

@@ -1,7 +1,7 @@
 """pymeshlab.Mesh <-> asrbf_mesh Scan / Mesh, vertex quality in place, the network cache.
 
 The array conversions reuse :mod:`asrbf_mesh.evaluate._meshlab` (``_from_ml``); what is added here
-is what the filters need beyond it: a :class:`~asrbf_mesh._io.Scan` of a layer, a new
+is what the filters need beyond it: a :class:`~asrbf_mesh.Scan` of a layer, a new
 layer with vertex normals, vertex and face quality, and writing vertex quality into an
 existing layer.
 """
@@ -51,12 +51,12 @@ def mesh_of(ms: pymeshlab.MeshSet, mesh_id: int | None, filter_name: str) -> pym
 
 
 def layer_mesh(m: pymeshlab.Mesh) -> Mesh:
-    """Vertices and faces of a layer as a :class:`~asrbf_mesh._mesh.Mesh` (compacts ``m``)."""
+    """Vertices and faces of a layer as a :class:`~asrbf_mesh.Mesh` (compacts ``m``)."""
     return _from_ml(m)
 
 
 def layer_scan(m: pymeshlab.Mesh) -> Scan:
-    """Return a layer as a :class:`~asrbf_mesh._io.Scan`: its vertices, and faces if any.
+    """Return a layer as a :class:`~asrbf_mesh.Scan`: its vertices, and faces if any.
 
     A non-compact layer is compacted in place first (deleted elements dropped), so
     vertex ``i`` of the scan is vertex ``i`` of the layer.

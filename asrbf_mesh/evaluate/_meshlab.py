@@ -1,7 +1,7 @@
 """Adapter for :mod:`pymeshlab`: the only module of the package that imports it.
 
 Small typed functions that take and return numpy arrays or
-:class:`~asrbf_mesh._mesh.Mesh`. Each call builds a fresh ``pymeshlab.MeshSet`` and passes
+:class:`~asrbf_mesh.Mesh`. Each call builds a fresh ``pymeshlab.MeshSet`` and passes
 *every* parameter of every filter explicitly: pymeshlab remembers a filter's parameter
 values between calls in one process, even on a new MeshSet (docs/design.md), so a default
 left implicit is whatever the previous caller set. Errors of pymeshlab surface as a
