@@ -15,83 +15,93 @@ Examples
 from __future__ import annotations
 
 import os as _os
+import sys as _sys
+from typing import TYPE_CHECKING
 
-# numba's default threading layer probes TBB first and warns about old versions;
-# prefer OpenMP / workqueue unless the user chose a layer.
-if "NUMBA_THREADING_LAYER" not in _os.environ:
-    import numba as _numba
-
-    _numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
-
-from ._config import FitConfig
-from ._footprint import Footprint
-from ._frame import DuplicatePointsWarning, Frame, HeightField, HeightFieldWarning, to_height_field
-from ._holes import FillResult, HoleInfo, fill_holes
-from ._io import face_map_path, load_scan, save_mesh
-from ._learn import LearnedState, NeuronCapWarning, fit, learn
-from ._lod import LodLevel, lod_set
-from ._mesh import Mesh, Scan
-from ._network import FitInfo, FitLog, Network, NeuronStats
-from ._stream import block_order, fit_stream
-from ._surface import reconstruct
 from ._version import __version__
 from .errors import AsrbfError, ConfigError, FitError, NetworkFileError, ScanError
 
-__all__ = [
-    "__version__",
-    "AsrbfError",
-    "ConfigError",
-    "DuplicatePointsWarning",
-    "FillResult",
-    "FitConfig",
-    "FitError",
-    "FitInfo",
-    "FitLog",
-    "Footprint",
-    "Frame",
-    "HeightField",
-    "HeightFieldWarning",
-    "HoleInfo",
-    "LearnedState",
-    "LodLevel",
-    "Mesh",
-    "Network",
-    "NetworkFileError",
-    "NeuronCapWarning",
-    "NeuronStats",
-    "Scan",
-    "ScanError",
-    "face_map_path",
-    "fill_holes",
-    "fit",
-    "block_order",
-    "fit_stream",
-    "learn",
-    "load_scan",
-    "lod_set",
-    "reconstruct",
-    "save_mesh",
-    "to_height_field",
-]
+# numba's default threading layer probes TBB first and warns about old versions;
+# prefer OpenMP / workqueue unless the user chose a layer (read when numba loads).
+if "NUMBA_THREADING_LAYER" not in _os.environ:
+    if "numba" in _sys.modules:
+        _sys.modules["numba"].config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+    else:
+        _os.environ.setdefault("NUMBA_THREADING_LAYER_PRIORITY", "omp workqueue tbb")
 
-_LAZY = {
-    # the evaluation side (pymeshlab, matplotlib) loads on first use only
-    "evaluate": ("asrbf_mesh.evaluate", None),
+# Public name -> the private module that defines it. Names load on first use (PEP 562), so
+# ``import asrbf_mesh`` and ``asrbf --help`` do not pay for numba, scipy or the kernels.
+_EXPORTS: dict[str, str] = {
+    "FitConfig": "_config",
+    "Footprint": "_footprint",
+    "DuplicatePointsWarning": "_frame",
+    "Frame": "_frame",
+    "HeightField": "_frame",
+    "HeightFieldWarning": "_frame",
+    "to_height_field": "_frame",
+    "FillResult": "_holes",
+    "HoleInfo": "_holes",
+    "fill_holes": "_holes",
+    "face_map_path": "_io",
+    "load_scan": "_io",
+    "save_mesh": "_io",
+    "LearnedState": "_learn",
+    "NeuronCapWarning": "_learn",
+    "fit": "_learn",
+    "learn": "_learn",
+    "LodLevel": "_lod",
+    "lod_set": "_lod",
+    "Mesh": "_mesh",
+    "Scan": "_mesh",
+    "FitInfo": "_network",
+    "FitLog": "_network",
+    "Network": "_network",
+    "NeuronStats": "_network",
+    "block_order": "_stream",
+    "fit_stream": "_stream",
+    "reconstruct": "_surface",
+    # the evaluation side (pymeshlab, matplotlib): a subpackage, loaded on first use
+    "evaluate": "",
 }
+
+__all__ = ["__version__", "AsrbfError", "ConfigError", "FitError", "NetworkFileError",
+           "ScanError", *sorted(n for n in _EXPORTS if n != "evaluate")]
+
+if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on demand
+    from . import evaluate
+    from ._config import FitConfig
+    from ._footprint import Footprint
+    from ._frame import (
+        DuplicatePointsWarning,
+        Frame,
+        HeightField,
+        HeightFieldWarning,
+        to_height_field,
+    )
+    from ._holes import FillResult, HoleInfo, fill_holes
+    from ._io import face_map_path, load_scan, save_mesh
+    from ._learn import LearnedState, NeuronCapWarning, fit, learn
+    from ._lod import LodLevel, lod_set
+    from ._mesh import Mesh, Scan
+    from ._network import FitInfo, FitLog, Network, NeuronStats
+    from ._stream import block_order, fit_stream
+    from ._surface import reconstruct
 
 
 def __getattr__(name: str):
-    """Load the evaluation side on first use: ``import asrbf_mesh`` stays free of pymeshlab."""
-    if name in _LAZY:
-        import importlib
+    """Import a public name from its private module on first use (PEP 562)."""
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'asrbf_mesh' has no attribute {name!r}")
+    import importlib
 
-        module, attr = _LAZY[name]
-        value = importlib.import_module(module)
-        value = value if attr is None else getattr(value, attr)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'asrbf_mesh' has no attribute {name!r}")
+    if module:
+        value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    else:
+        value = importlib.import_module(f"{__name__}.{name}")
+    globals()[name] = value
+    return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -22,6 +22,14 @@ UPDATES = ("nekf", "nekf-neighbourhood", "gekf", "gd")
 PRUNINGS = ("none", "literal", "support")
 DECAYS = ("observation", "neurons")
 POLISHES = ("none", "weights", "full")
+#: Depth directions of a height field (``to_height_field``'s ``view_axis``).
+VIEW_AXES = ("z", "x", "y", "pca")
+#: How a hole fill carries the scan's residual across the hole.
+BLENDS = ("thin-plate", "harmonic")
+#: Footprint modes of ``reconstruct``.
+FOOTPRINT_MODES = ("scan", "hull", "full")
+#: LOD methods of ``lod_set``.
+LOD_METHODS = ("resample", "refit")
 
 Update = Literal["nekf", "nekf-neighbourhood", "gekf", "gd"]
 Pruning = Literal["none", "literal", "support"]

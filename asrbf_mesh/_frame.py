@@ -15,6 +15,7 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import _config
 from ._mesh import collinear_xy as _collinear_xy
 from ._validate import check_points
 from .errors import ConfigError, ScanError
@@ -24,7 +25,7 @@ __all__ = ["Frame", "HeightField", "HeightFieldWarning", "DuplicatePointsWarning
            "VIEW_AXES"]
 
 ViewAxis = Literal["z", "x", "y", "pca"]
-VIEW_AXES = ("z", "x", "y", "pca")
+VIEW_AXES = _config.VIEW_AXES
 
 # local axes (columns) for the fixed view axes: right-handed, depth last
 _AXES = {

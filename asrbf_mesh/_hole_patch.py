@@ -18,6 +18,7 @@ from scipy.interpolate import RBFInterpolator
 from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
+from . import _config
 from . import _holes_kernels as _hk
 from ._footprint import signed_areas
 from ._hole_find import Hole
@@ -27,7 +28,7 @@ __all__ = ["BLENDS", "EMPTY", "Ctx", "Patch", "away_from", "close_patch", "fill_
            "grid_samples", "ring_reach", "triangulate"]
 
 #: How the scan's residual is carried across a hole (``fill_holes(blend=...)``).
-BLENDS = ("thin-plate", "harmonic")
+BLENDS = _config.BLENDS
 # The residual spline sees the scan points within max(6 spacings, a quarter of the hole
 # size) of the rim, thinned to at most 1,500, in one global thin plate (no neighbour
 # cut-off). Measured on punched holes (face / bun000 / bun045 / bun180, RMS % of the

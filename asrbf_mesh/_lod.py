@@ -32,6 +32,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from . import _config
 from ._config import FitConfig
 from ._frame import Frame, to_height_field
 from ._io import Scan
@@ -55,7 +56,7 @@ __all__ = [
 Method = Literal["resample", "refit"]
 
 #: LOD methods of :func:`lod_set`.
-METHODS: tuple[str, ...] = ("resample", "refit")
+METHODS: tuple[str, ...] = _config.LOD_METHODS
 
 #: ``refit`` samples the network of separation ``D_min`` at a grid of ``D_min / 4``.
 REFIT_GRID_PER_D_MIN = 4.0

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _config
 from ._footprint import Footprint
 from ._frame import sampling_spacing
 from ._io import Scan
@@ -20,7 +21,7 @@ from .errors import ConfigError, ScanError
 
 __all__ = ["reconstruct", "grid_faces", "FOOTPRINT_MODES"]
 
-FOOTPRINT_MODES = ("scan", "hull", "full")
+FOOTPRINT_MODES = _config.FOOTPRINT_MODES
 
 
 def grid_faces(nx: int, ny: int, keep: np.ndarray | None = None) -> np.ndarray:

@@ -19,17 +19,29 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, NoReturn
 
-from . import __version__, tasks
+from . import __version__
 from ._atomic import atomic_path, check_output_dir
-from ._config import DECAYS, POLISHES, PRUNINGS, UPDATES, FitConfig
-from ._frame import VIEW_AXES
-from ._holes import BLENDS
-from ._io import face_map_path
-from ._surface import FOOTPRINT_MODES
+from ._config import (
+    BLENDS,
+    DECAYS,
+    FOOTPRINT_MODES,
+    POLISHES,
+    PRUNINGS,
+    UPDATES,
+    VIEW_AXES,
+    FitConfig,
+)
 from ._validate import strict_json
 from .errors import AsrbfError, ConfigError
 
 __all__ = ["main", "build_parser", "task_options"]
+
+
+def _tasks() -> Any:
+    """Import the task layer when a command runs (``asrbf --help`` stays instant)."""
+    from . import tasks
+
+    return tasks
 
 # FitConfig field -> (flag, type, help naming the paper's symbol)
 _LEARNING_OPTIONS: list[tuple[str, str, type, str]] = [
@@ -205,13 +217,13 @@ _NOT_OPTIONS = ("command", "run", "show", "json")
 def _task_kwargs(args: argparse.Namespace, command: str, quiet: bool) -> dict[str, Any]:
     """Return the namespace of a command as keyword arguments of its task function."""
     kwargs = {k: v for k, v in vars(args).items() if k not in _NOT_OPTIONS}
-    if "progress" in inspect.signature(tasks.COMMANDS[command]).parameters:
+    if "progress" in inspect.signature(_tasks().COMMANDS[command]).parameters:
         kwargs["progress"] = False if quiet else None
     return kwargs
 
 
 def _run_task(args: argparse.Namespace) -> int:
-    result = tasks.COMMANDS[args.command](**_task_kwargs(args, args.command, args.json))
+    result = _tasks().COMMANDS[args.command](**_task_kwargs(args, args.command, args.json))
     if args.json:
         print(strict_json(result, indent=1) if args.command == "report"
               else strict_json(result))
@@ -221,9 +233,11 @@ def _run_task(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    from ._io import face_map_path
+
     print(f"asrbf-mesh {__version__} demo: the face range map shipped with pymeshlab\n  "
           f"{face_map_path()}")
-    d = tasks.demo(args.output, seed=args.seed)
+    d = _tasks().demo(args.output, seed=args.seed)
     _print_summary(d)
     print(f"  wrote {d['network']} ({d['network_bytes']:,} bytes)")
     print(f"  wrote {d['footprint_mesh']} ({d['footprint_vertices']:,} vertices, footprint of "
@@ -266,7 +280,7 @@ def task_options(task: str, text: str) -> dict[str, Any]:
         ns = p.parse_args(tokens)
     except argparse.ArgumentError as exc:
         p.error(str(exc))
-    return tasks.check_options(task, **_task_kwargs(ns, task, quiet=True))
+    return _tasks().check_options(task, **_task_kwargs(ns, task, quiet=True))
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
