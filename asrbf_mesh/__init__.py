@@ -68,7 +68,6 @@ __all__ = ["__version__", "AsrbfError", "ConfigError", "FitError", "NetworkFileE
            "ScanError", *sorted(n for n in _EXPORTS if n != "evaluate")]
 
 if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on demand
-    from . import evaluate
     from ._config import FitConfig
     from ._footprint import Footprint
     from ._frame import (

@@ -161,7 +161,7 @@ def test_cli_compare_text(capsys, scan_file: Path, net_file: Path, tmp_path: Pat
 
 
 @pytest.mark.parametrize(("argv", "match"), [
-    (["compare", "{scan}", "-o", "{tmp}/c", "--som-iterations", "0"], "som_iterations must be"),
+    (["compare", "{scan}", "-o", "{tmp}/c", "--som-iterations", "0"], "--som-iterations must be"),
     (["compare", "{points}", "-o", "{tmp}/c"], "needs a scan with faces"),
     (["compare", "{scan}", "-o", "{scan}"], "is not a folder"),
     (["report", "{tmp}/nothing", "-o", "{tmp}/s"], "no such file"),
