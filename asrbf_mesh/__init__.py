@@ -47,6 +47,8 @@ _EXPORTS: dict[str, str] = {
     "save_mesh": "_io",
     "LearnedState": "_learn",
     "NeuronCapWarning": "_learn",
+    "OutlierWarning": "_outliers",
+    "isolated_points": "_outliers",
     "fit": "_learn",
     "learn": "_learn",
     "LodLevel": "_lod",
@@ -83,6 +85,7 @@ if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on d
     from ._lod import LodLevel, lod_set
     from ._mesh import Mesh, Scan
     from ._network import FitInfo, FitLog, Network, NeuronStats
+    from ._outliers import OutlierWarning, isolated_points
     from ._stream import block_order, fit_stream
     from ._surface import reconstruct
 

@@ -13,6 +13,7 @@ from scipy import ndimage
 from scipy.spatial import Delaunay, QhullError
 
 from . import _holes_kernels as _hk
+from ._outliers import isolated_points
 from .errors import ScanError
 
 __all__ = ["Footprint", "point_cloud_faces", "signed_areas"]
@@ -94,8 +95,12 @@ class Footprint:
     def of(cls, xy: np.ndarray, faces: np.ndarray, spacing: float) -> Footprint:
         """Rasterize the triangles at half the sampling spacing and label the gaps."""
         cell = 0.5 * spacing
-        lo = xy.min(axis=0) - 3 * cell
-        nx, ny = (np.ceil((xy.max(axis=0) + 3 * cell - lo) / cell).astype(int) + 1)
+        # the raster spans the points that are not isolated: one stray point far away
+        # (left out of the fit too) would otherwise blow the raster up
+        stray = isolated_points(xy)
+        box = xy[~stray] if stray.any() and not stray.all() else xy
+        lo = box.min(axis=0) - 3 * cell
+        nx, ny = (np.ceil((box.max(axis=0) + 3 * cell - lo) / cell).astype(int) + 1)
         if nx * ny > 200_000_000:
             raise ScanError("the scan's footprint raster would be too large "
                             "(spacing too small?)")

@@ -38,6 +38,7 @@ from ._config import FitConfig
 from ._frame import HeightField, HeightFieldWarning, to_height_field
 from ._io import Scan
 from ._network import FitInfo, FitLog, Network
+from ._outliers import OutlierWarning, describe_isolated, isolated_points
 from ._validate import check_points, check_seed
 from ._version import __version__
 from .errors import FitError, ScanError
@@ -432,8 +433,17 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     named = f"{source}: " if source else ""
     if len(points) < MIN_POINTS:
         raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points, got {len(points)}")
+    stray = isolated_points(points)
+    n_stray = int(stray.sum())
+    fitted = points
+    if n_stray:  # stray returns would set the frame and pull the surface: leave them out
+        warnings.warn(describe_isolated(points, stray, named), OutlierWarning, stacklevel=2)
+        fitted = points[~stray]
+        if len(fitted) < MIN_POINTS:
+            raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points that are not "
+                            f"isolated, got {len(fitted)}")
     try:
-        hf = to_height_field(points, view_axis=view_axis)  # type: ignore[arg-type]
+        hf = to_height_field(fitted, view_axis=view_axis)  # type: ignore[arg-type]
     except ScanError as exc:
         if not named or str(exc).startswith(named):
             raise
@@ -460,5 +470,6 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     fit_seconds = time.perf_counter() - t0
     info = fit_info(hf.n_points, net, source, source_hash(points), int(seed), hf.spacing,
                     learned, pr, float(np.mean(np.abs(res))), float(abs_mm.mean()),
-                    float(abs_mm.std()), polish_seconds, fit_seconds)
+                    float(abs_mm.std()), polish_seconds, fit_seconds,
+                    outliers=n_stray or None)
     return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info.to_dict())

@@ -39,6 +39,7 @@ from ._io import Scan
 from ._learn import auto_d_min, fit
 from ._mesh import Mesh
 from ._network import Network
+from ._outliers import isolated_points
 from ._surface import reconstruct
 from ._validate import check_bool, check_int, check_seed
 from .errors import ConfigError, ScanError
@@ -340,7 +341,8 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         frame = net.frame if net is not None else None
         spacing = net.info.get("spacing") if net is not None else None
         if frame is None or not spacing:
-            hf = to_height_field(sc.points, view_axis=frame.view_axis if frame else "z",
+            inliers = sc.points[~isolated_points(sc.points)]  # as the fit will see them
+            hf = to_height_field(inliers, view_axis=frame.view_axis if frame else "z",
                                  warn_fraction=1.0)  # the fit warns, once
             frame, spacing = frame or hf.frame, spacing or hf.spacing
         gmean = float(np.sqrt(frame.scale[0] * frame.scale[1]))

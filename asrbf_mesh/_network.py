@@ -145,6 +145,9 @@ class FitInfo:
         The streaming fit's block size and group size.
     spacing_exact : bool or None
         Streaming fit: False when the spacing came from a sample of tiles.
+    outliers : int or None
+        Isolated points left out of the frame and the fit (``n_points`` counts the others);
+        None (and absent from ``info``) when there were none.
     """
 
     n_points: int
@@ -168,6 +171,7 @@ class FitInfo:
     chunk: int | None = None
     mix: int | None = None
     spacing_exact: bool | None = None
+    outliers: int | None = None
 
     _STREAM = ("streamed", "chunk", "mix", "spacing_exact")
 
@@ -178,7 +182,7 @@ class FitInfo:
             v = getattr(self, f.name)
             if f.name in self._STREAM and not self.streamed:
                 continue
-            if f.name in VOLATILE_INFO and v is None:
+            if (f.name in VOLATILE_INFO or f.name == "outliers") and v is None:
                 continue
             out[f.name] = v
         return out
