@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import check_points, plural
+from ._validate import check_points, float_array, plural
 from .errors import ScanError
 
 __all__ = ["Mesh", "Scan", "collinear_xy", "compact"]
@@ -70,11 +70,7 @@ class Mesh:
             arr = getattr(self, name)
             if arr is None:
                 continue
-            try:
-                arr = np.ascontiguousarray(arr, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ScanError(f"{name} must be an array of numbers, "
-                                f"got {type(arr).__name__}") from None
+            arr = float_array(arr, name)
             want = (len(v), width) if width else (len(v),)
             if arr.shape != want:
                 raise ScanError(f"{name} must have shape {want}, got {arr.shape}")

@@ -156,6 +156,14 @@ def check_choice(value: Any, name: str, choices: Sequence[str]) -> str:
     return value
 
 
+def float_array(value: Any, name: str, what: str = "an array of numbers") -> np.ndarray:
+    """Return ``value`` as a C-contiguous float64 array, or raise :class:`ScanError`."""
+    try:
+        return np.ascontiguousarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ScanError(f"{name} must be {what}, got {type(value).__name__}") from None
+
+
 def check_points(points: Any, name: str = "points", *, min_points: int = 1,
                  columns: int = 3) -> np.ndarray:
     """Return ``points`` as a C-contiguous float64 ``(N, columns)`` array of finite values.
@@ -177,11 +185,7 @@ def check_points(points: Any, name: str = "points", *, min_points: int = 1,
         if not isinstance(points, np.ndarray) and hasattr(points, attr):
             points = getattr(points, attr)
             break
-    try:
-        p = np.ascontiguousarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ScanError(f"{name} must be an (N, {columns}) array of numbers, "
-                        f"got {type(points).__name__}") from None
+    p = float_array(points, name, f"an (N, {columns}) array of numbers")
     if p.ndim != 2 or p.shape[1] != columns:
         raise ScanError(f"{name} must be an (N, {columns}) array, got shape {p.shape}")
     if len(p) < min_points:
