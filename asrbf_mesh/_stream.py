@@ -32,6 +32,7 @@ import io
 import math
 import os
 import time
+import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from typing import Any
@@ -50,6 +51,7 @@ from ._frame import (
 from ._io import check_scan_path
 from ._learn import MIN_POINTS, auto_d_min, fit_info, learn_from, polish_kind
 from ._network import Network
+from ._outliers import OutlierWarning
 from ._readers import (
     FORMAT_NAMES,
     TEXT_PROBE,
@@ -276,6 +278,34 @@ def block_order(n: int, chunk: int, mix: int, rng: np.random.Generator) -> np.nd
 # --------------------------------------------------------------------------- fit
 
 
+def _warn_far_points(name: str, sample: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Warn when a few points far from the rest set the scan's extent (stray returns).
+
+    An in-memory fit leaves isolated points out (:func:`asrbf_mesh.isolated_points`); a
+    streamed one cannot find them in O(K + block) memory, but it can see their effect: the
+    full range of an axis reaching more than ten robust extents (1st-99th percentile range
+    of the spacing sample; at least a tenth of the largest axis's) beyond that range. On the
+    real scans here the full range reaches at most 1.06 robust extents beyond (the face
+    map's depth).
+    """
+    if len(sample) < 100:
+        return
+    q_lo, q_hi = np.quantile(sample, [0.01, 0.99], axis=0)
+    ext = q_hi - q_lo
+    ext = np.maximum(ext, 0.1 * float(ext.max()))
+    if not ext.max() > 0:
+        return
+    excess = np.maximum(q_lo - lo, hi - q_hi) / ext
+    axis = int(np.argmax(excess))
+    if excess[axis] > 10.0:
+        warnings.warn(
+            f"{name}: a few points lie far from the rest: along the view frame's "
+            f"{'xyz'[axis]} axis the scan spans {hi[axis] - lo[axis]:.6g} where 98 % of it "
+            f"spans {q_hi[axis] - q_lo[axis]:.6g}; a streamed fit does not leave isolated "
+            "points out (its frame and surface suffer): remove them, or fit without "
+            "--stream, which does", OutlierWarning, stacklevel=3)
+
+
 def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
                seed: int = 0, view_axis: str = "z", chunk: int = DEFAULT_CHUNK,
                mix: int = DEFAULT_MIX, progress: bool | None = None,
@@ -386,6 +416,7 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
         sample_local.append(local[keep])
         sample_xy.append(xy[keep])
     local_s = np.concatenate(sample_local)
+    _warn_far_points(name, local_s, lo, hi)
     try:
         frame = frame_from_bounds(rot, lo, hi, absmax, view_axis,
                                   np.concatenate(all_xy) if exact else local_s[:, :2])

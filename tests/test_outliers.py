@@ -107,3 +107,16 @@ def test_a_sparse_scan_keeps_its_points() -> None:
     for seed in range(20):
         pts = np.random.default_rng(seed).random((100, 3))
         assert not isolated_points(pts).any(), seed
+
+
+def test_a_streamed_fit_warns_about_far_points(tmp_path: Path) -> None:
+    """--stream cannot leave strays out in O(K + block) memory: it says so instead."""
+    pts = surface()
+    np.save(tmp_path / "clean.npy", pts)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", am.OutlierWarning)
+        am.fit_stream(tmp_path / "clean.npy", seed=0, chunk=8192, progress=False)
+    pts[1234, 0] = 1e6
+    np.save(tmp_path / "stray.npy", pts)
+    with pytest.warns(am.OutlierWarning, match=r"a few points lie far from the rest.*x axis"):
+        am.fit_stream(tmp_path / "stray.npy", seed=0, chunk=8192, progress=False)
