@@ -61,6 +61,8 @@ _EXPORTS: dict[str, str] = {
     "NeuronStats": "_network",
     "block_order": "_stream",
     "fit_stream": "_stream",
+    "Segmentation": "_segment",
+    "segment": "_segment",
     "reconstruct": "_surface",
     # the evaluation side (pymeshlab, matplotlib): a subpackage, loaded on first use
     "evaluate": "",
@@ -86,6 +88,7 @@ if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on d
     from ._mesh import Mesh, Scan
     from ._network import FitInfo, FitLog, Network, NeuronStats
     from ._outliers import OutlierWarning, isolated_points
+    from ._segment import Segmentation, segment
     from ._stream import block_order, fit_stream
     from ._surface import reconstruct
 

@@ -1,0 +1,157 @@
+"""Segmentation into smooth height-field pieces (piecewise networks, first block)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from _grids import grid_faces, height_grid
+
+import asrbf_mesh as am
+from asrbf_mesh._validate import strict_json
+
+NX, NY = 40, 20  # a range grid of unit spacing; the cliff runs along x = 20
+
+
+def smooth(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return 2.0 * np.sin(x / 9.0) * np.cos(y / 7.0)
+
+
+def cliff(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The smooth surface, raised by ten spacings where x >= 20 (a vertical cliff)."""
+    return smooth(x, y) + np.where(x >= 19.5, 10.0, 0.0)
+
+
+def grid(func, nx: int = NX, ny: int = NY) -> tuple[np.ndarray, np.ndarray]:
+    return height_grid(func, nx, ny, x=(0.0, nx - 1.0), y=(0.0, ny - 1.0))
+
+
+def with_fragment() -> tuple[np.ndarray, np.ndarray]:
+    """The smooth grid plus a floating 5 x 2 fragment beside it, 5 spacings away, 30 up."""
+    pts, faces = grid(smooth)
+    fx, fy = np.meshgrid(np.arange(5.0) + NX + 4, np.arange(2.0) + 5)
+    frag = np.c_[fx.ravel(), fy.ravel(), np.full(10, 30.0)]
+    return np.vstack([pts, frag]), np.vstack([faces, grid_faces(5, 2) + len(pts)])
+
+
+@pytest.mark.parametrize("cloud", [False, True], ids=["faces", "cloud"])
+def test_a_smooth_surface_is_one_piece(cloud: bool) -> None:
+    pts, faces = grid(smooth)
+    seg = am.segment(pts if cloud else am.Scan(pts, faces))
+    assert seg.n_pieces == 1 and not seg.small.any()
+    assert seg.labels.tolist() == [0] * len(pts)
+    assert seg.source == ("cloud" if cloud else "faces")
+
+
+@pytest.mark.parametrize("cloud", [False, True], ids=["faces", "cloud"])
+def test_a_cliff_splits_the_scan_in_two_pieces(cloud: bool) -> None:
+    pts, faces = grid(cliff)
+    seg = am.segment(pts if cloud else am.Scan(pts, faces))
+    assert seg.n_pieces == 2 and not seg.small.any()
+    truth = (pts[:, 0] >= 19.5).astype(np.int64)  # point 0 (x = 0) is in piece 0
+    np.testing.assert_array_equal(seg.labels, truth)
+    assert seg.sizes.tolist() == [20 * NY, 20 * NY]
+    assert seg.n_cut > 0
+
+
+def test_the_prototype_rule_splits_the_cliff_too() -> None:
+    pts, faces = grid(cliff)
+    seg = am.segment(am.Scan(pts, faces), wall_angle_deg=72.5, jump_factor=3.0)
+    np.testing.assert_array_equal(seg.labels, (pts[:, 0] >= 19.5).astype(np.int64))
+
+
+def test_the_cliff_is_found_along_another_view_axis() -> None:
+    pts, faces = grid(cliff)
+    seg = am.segment(am.Scan(pts[:, [2, 0, 1]], faces), view_axis="x")  # depth along x
+    np.testing.assert_array_equal(seg.labels, (pts[:, 0] >= 19.5).astype(np.int64))
+
+
+@pytest.mark.parametrize("cloud", [False, True], ids=["faces", "cloud"])
+def test_a_floating_fragment_is_its_own_small_piece(cloud: bool) -> None:
+    pts, faces = with_fragment()
+    seg = am.segment(pts if cloud else am.Scan(pts, faces))
+    assert seg.n_pieces == 2
+    assert seg.sizes.tolist() == [NX * NY, 10]
+    assert seg.small.tolist() == [False, True]
+    assert (seg.labels[-10:] == 1).all() and (seg.labels[:-10] == 0).all()
+    assert seg.indices(1).tolist() == list(range(NX * NY, NX * NY + 10))
+    # with a lower threshold the fragment is not small
+    assert not am.segment(pts, min_piece_points=10).small.any()
+
+
+def test_every_point_gets_a_piece() -> None:
+    pts, faces = grid(cliff)
+    # points used by no triangle: an extra point near each side, and the faces of one
+    # column left out; each joins the piece of its nearest kept vertex
+    extra = np.array([[3.3, 4.4, smooth(3.3, 4.4)], [30.2, 7.1, cliff(30.2, 7.1)]])
+    pts2 = np.vstack([pts, extra])
+    keep = np.ones((NY - 1, NX - 1), dtype=bool)
+    keep[:, 0] = False
+    seg = am.segment(am.Scan(pts2, grid_faces(NX, NY, keep)))
+    truth = (pts2[:, 0] >= 19.5).astype(np.int64)
+    np.testing.assert_array_equal(seg.labels, truth)
+    assert seg.sizes.sum() == len(pts2) and seg.labels.min() == 0
+
+
+@pytest.mark.parametrize("points", [[[0.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
+                                    [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 2.0, 5.0]],
+                                    [[1.0, 1.0, 0.0]] * 4])
+def test_scans_without_a_surface_are_one_piece(points: list) -> None:
+    seg = am.segment(points)
+    assert seg.n_pieces == 1 and seg.labels.tolist() == [0] * len(points)
+    assert seg.small.tolist() == [True]
+
+
+def test_same_input_same_labels_in_a_stable_order() -> None:
+    rng = np.random.default_rng(3)
+    pts, _ = grid(cliff)
+    pts = pts + rng.normal(0, 0.05, pts.shape)
+    pts = np.vstack([pts, with_fragment()[0][-10:]])
+    first = am.segment(pts)
+    again = am.segment(pts.copy())
+    np.testing.assert_array_equal(first.labels, again.labels)
+    # pieces are numbered by their smallest point index
+    _, where = np.unique(first.labels, return_index=True)
+    assert (np.diff(where) > 0).all() and first.labels[0] == 0
+
+
+def test_the_result_is_frozen_and_summarised() -> None:
+    pts, faces = with_fragment()
+    seg = am.segment(am.Scan(pts, faces), min_piece_points=11)
+    with pytest.raises(ValueError):
+        seg.labels[0] = 5
+    with pytest.raises(AttributeError):
+        seg.n_cut = 3  # type: ignore[misc]
+    d = json.loads(strict_json(seg.to_dict()))
+    assert d["n_pieces"] == 2 and d["sizes"] == [NX * NY, 10]
+    assert d["n_small"] == 1 and d["points_in_small"] == 10
+    assert d["min_piece_points"] == 11 and d["view_axis"] == "z"
+    assert d["wall_angle_deg"] == 80.0 and d["jump_factor"] == 5.0
+    assert "2 pieces" in repr(seg)
+    assert isinstance(seg, am.Segmentation)
+
+
+@pytest.mark.parametrize(("kw", "name"), [
+    ({"view_axis": "w"}, "view_axis"),
+    ({"view_axis": None}, "view_axis"),
+    ({"wall_angle_deg": 0}, "wall_angle_deg"),
+    ({"wall_angle_deg": 95.0}, "wall_angle_deg"),
+    ({"wall_angle_deg": float("nan")}, "wall_angle_deg"),
+    ({"wall_angle_deg": "steep"}, "wall_angle_deg"),
+    ({"jump_factor": 1.0}, "jump_factor"),
+    ({"jump_factor": float("inf")}, "jump_factor"),
+    ({"min_piece_points": 0}, "min_piece_points"),
+    ({"min_piece_points": 2.5}, "min_piece_points"),
+    ({"min_piece_points": True}, "min_piece_points"),
+])
+def test_bad_parameters_raise_config_errors_naming_them(kw: dict, name: str) -> None:
+    pts, _ = grid(smooth, 5, 5)
+    with pytest.raises(am.ConfigError, match=f"^{name} "):
+        am.segment(pts, **kw)
+
+
+@pytest.mark.parametrize("points", [np.zeros((0, 3)), [[0.0, np.nan, 1.0]], [[1.0, 2.0]]])
+def test_bad_points_raise_scan_errors(points) -> None:
+    with pytest.raises(am.ScanError):
+        am.segment(points)
