@@ -17,12 +17,20 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _bench_common import ROOT, best_time, machine, scans, table  # noqa: E402
+from _bench_common import (  # noqa: E402
+    ROOT,
+    best_time,
+    machine,
+    scans,
+    table,
+    write_section,
+)
 
 import asrbf_mesh as am  # noqa: E402
 
@@ -43,13 +51,26 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         found["bun000_crop"] = am.load_scan(ROOT / "tests" / "data" / "bun000_crop.ply")
-    print(machine())
+    t0 = time.perf_counter()
+    parts = []
     for wall, jump in settings:
         opts = {"wall_angle_deg": wall, "jump_factor": jump,
                 "min_piece_points": args.min_piece_points}
-        print(f"\nsegment: wall angle {wall} deg, jump factor {jump}, "
-              f"min piece points {args.min_piece_points}\n")
-        print(table(HEADERS, _rows(found, opts)))
+        parts.append(f"Wall angle {wall:g}°, jump factor {jump:g}, min piece points "
+                     f"{args.min_piece_points}"
+                     f"{' (the defaults)' if (wall, jump) == (80.0, 5.0) else ''}:\n\n"
+                     + table(HEADERS, _rows(found, opts)))
+    head = (f"## Segmentation into smooth pieces (issue 14, first step)\n\n"
+            f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
+            f"`python scripts/bench_segment.py` ({time.perf_counter() - t0:.0f} s)._\n\n"
+            "`am.segment` cuts the triangles seen nearly edge-on (|n·view| < cos(wall angle)) "
+            "or with a longest edge over the jump factor × the median edge; connected "
+            "components of the rest are the pieces (a point cloud is triangulated in the "
+            "view plane first). Not used by the fit yet.\n\n")
+    body = head + "\n\n".join(parts)
+    print(body)
+    if len(settings) == 2:
+        write_section("segment", body)
     return 0
 
 
