@@ -44,7 +44,7 @@ from ._version import __version__
 from .errors import FitError, ScanError
 
 __all__ = ["fit", "learn", "learn_from", "auto_d_min", "residuals", "fit_info", "MIN_POINTS",
-           "LearnedState", "NeuronCapWarning"]
+           "LearnedState", "NeuronCapWarning", "learn_polished"]
 
 
 class NeuronCapWarning(UserWarning):
@@ -373,6 +373,35 @@ def residuals(net: Network, hf: HeightField) -> np.ndarray:
     return hf.z - net.evaluate(hf.xy, unit=True)
 
 
+def learn_polished(hf: HeightField, cfg: FitConfig, polish: str, *, seed: int,
+                   progress: bool | None = None,
+                   order: Callable[[np.random.Generator], np.ndarray] | None = None
+                   ) -> tuple[LearnedState, Any, tuple, float]:
+    """Learn a height field, then run ``polish`` (``"weights"``, ``"full"`` or ``"none"``).
+
+    The learning and batch stage of :func:`fit`, shared with the piecewise fit
+    (:mod:`asrbf_mesh._pieces`). Returns the learned state, the polish's result (None
+    for ``"none"``), the final ``(a0, centers, widths, weights)`` in the unit cube and
+    the polish's seconds.
+    """
+    from ._polish import polish_full, polish_weights
+
+    learned = learn(hf, cfg, seed=seed, progress=progress, order=order)
+    a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
+    tp = time.perf_counter()
+    if polish == "weights":
+        pr = polish_weights(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
+                            cfg.polish_ridge)
+    elif polish == "full":
+        pr = polish_full(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
+                         iterations=cfg.polish_iterations, ridge=cfg.polish_ridge)
+    else:
+        pr = None
+    if pr is not None:
+        a0, centers, widths, weights = pr.a0, pr.centers, pr.widths, pr.weights
+    return learned, pr, (a0, centers, widths, weights), time.perf_counter() - tp
+
+
 def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int = 0,
         view_axis: str = "z", progress: bool | None = None,
         order: Callable[[np.random.Generator], np.ndarray] | None = None,
@@ -422,8 +451,6 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     >>> bool(net.info["ebar"] < 0.01)
     True
     """
-    from ._polish import polish_full, polish_weights
-
     seed = check_seed(seed)
     cfg = (config or FitConfig()).replace(**overrides) if overrides else (config or FitConfig())
     if isinstance(scan, Scan):
@@ -449,21 +476,9 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
             raise
         raise ScanError(f"{named}{exc}") from None  # name the file, like load_scan
     t0 = time.perf_counter()
-    learned = learn(hf, cfg, seed=seed, progress=progress, order=order)
-    a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
-    tp = time.perf_counter()
     polish = polish_kind(hf.fold, cfg.polish)
-    if polish == "weights":
-        pr = polish_weights(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
-                            cfg.polish_ridge)
-    elif polish == "full":
-        pr = polish_full(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
-                         iterations=cfg.polish_iterations, ridge=cfg.polish_ridge)
-    else:
-        pr = None
-    if pr is not None:
-        a0, centers, widths, weights = pr.a0, pr.centers, pr.widths, pr.weights
-    polish_seconds = time.perf_counter() - tp
+    learned, pr, (a0, centers, widths, weights), polish_seconds = learn_polished(
+        hf, cfg, polish, seed=seed, progress=progress, order=order)
     net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)
     res = residuals(net, hf)
     abs_mm = np.abs(res) * hf.frame.scale[2]

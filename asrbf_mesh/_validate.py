@@ -142,6 +142,24 @@ def check_bool(value: Any, name: str, *, allow_none: bool = False) -> bool | Non
                       f"got {value!r}")
 
 
+def check_instance(value: Any, name: str, kind: type, *, allow_none: bool = False) -> Any:
+    """Return ``value`` if it is a ``kind`` (or None when ``allow_none``), else ConfigError.
+
+    Examples
+    --------
+    >>> check_instance(None, "config", dict, allow_none=True) is None
+    True
+    >>> check_instance("x", "config", dict)
+    Traceback (most recent call last):
+    ...
+    asrbf_mesh.errors.ConfigError: config must be a dict, got str
+    """
+    if (value is None and allow_none) or isinstance(value, kind):
+        return value
+    raise ConfigError(f"{name} must be a {kind.__name__}{' or None' if allow_none else ''}, "
+                      f"got {type(value).__name__}")
+
+
 def check_choice(value: Any, name: str, choices: Sequence[str]) -> str:
     """Return ``value`` if it is one of ``choices``, else raise :class:`ConfigError`.
 
