@@ -178,7 +178,7 @@ def atomic_dir(path: str | os.PathLike, owns: Sequence[str] = ()) -> Iterator[Pa
     """Yield a hidden temporary folder beside ``path``; it takes the place of ``path`` on success.
 
     The folder output appears whole or not at all: the work writes into
-    ``.NAME.tmp-XXXX`` in the same parent (created with its missing parents), renamed
+    ``.NAME.tmp-<random>`` in the same parent (created with its missing parents), renamed
     onto ``path`` at the end. An existing ``path`` that is empty or holds only names
     matching the glob patterns ``owns`` (a previous run of the same command) is
     replaced, so files of the earlier run do not linger; a folder holding anything

@@ -414,7 +414,9 @@ def test_relative_links_resolve(doc: str) -> None:
         if re.match(r"[a-z]+://|mailto:", target):
             continue
         file, _, anchor = target.partition("#")
-        dest = (path.parent / file).resolve() if file else path
+        # "/X" is relative to the repository root (as GitHub renders it), "X" to the document
+        dest = ((ROOT / file.lstrip("/")) if file.startswith("/") else
+                (path.parent / file)).resolve() if file else path
         if not dest.exists():
             bad.append(f"{target}: no such file")
         elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
