@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import check_points, float_array, plural
+from ._validate import check_points, float_array, plural, readonly
 from .errors import ScanError
 
 __all__ = ["Mesh", "Scan", "collinear_xy", "compact"]
@@ -90,14 +90,6 @@ class Mesh:
         return int(len(self.faces))
 
 
-def _readonly_copy(value: object, arr: np.ndarray) -> np.ndarray:
-    """Return ``arr`` made read-only, copying it first if it may alias a writeable input."""
-    if isinstance(value, np.ndarray) and value.flags.writeable and np.may_share_memory(arr, value):
-        arr = arr.copy()
-    arr.flags.writeable = False
-    return arr
-
-
 @dataclass(frozen=True, eq=False)
 class Scan:
     """An immutable range scan: points, optional triangles and provenance.
@@ -152,7 +144,7 @@ class Scan:
         if pts.dtype.kind not in "iuf":
             raise ScanError(f"{where}points must be real numbers, got dtype {pts.dtype}")
         pts = check_points(pts, f"{where}points", min_points=0)
-        object.__setattr__(self, "points", _readonly_copy(self.points, pts))
+        object.__setattr__(self, "points", readonly(pts, self.points))
 
         faces = self.faces
         if faces is not None:
@@ -176,7 +168,7 @@ class Scan:
                         f"{where}{plural(n_bad, 'face')} {verb} points outside [0, {n})"
                     )
                 f = np.ascontiguousarray(f, dtype=np.int64)
-                faces = _readonly_copy(self.faces, f)
+                faces = readonly(f, self.faces)
         object.__setattr__(self, "faces", faces)
 
         if self.grid_shape is not None:

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from . import _config
-from ._validate import check_choice, check_float, check_int, check_points, plural
+from ._validate import check_choice, check_float, check_int, check_points, plural, readonly
 from .errors import ScanError
 
 __all__ = ["Segmentation", "segment", "WALL_ANGLE_DEG", "JUMP_FACTOR", "MIN_PIECE_POINTS"]
@@ -54,12 +54,6 @@ WALL_ANGLE_DEG = 80.0
 JUMP_FACTOR = 5.0
 #: Pieces with fewer points are flagged small.
 MIN_PIECE_POINTS = 30
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, copy=True)
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,9 +95,9 @@ class Segmentation:
 
     def __post_init__(self) -> None:
         """Freeze the arrays and check that they agree."""
-        labels = _readonly(np.asarray(self.labels, dtype=np.int64))
-        sizes = _readonly(np.asarray(self.sizes, dtype=np.int64))
-        small = _readonly(np.asarray(self.small, dtype=bool))
+        labels = readonly(np.array(self.labels, dtype=np.int64))
+        sizes = readonly(np.array(self.sizes, dtype=np.int64))
+        small = readonly(np.array(self.small, dtype=bool))
         if labels.ndim != 1 or sizes.shape != small.shape or sizes.sum() != len(labels):
             raise ScanError("labels, sizes and small of a Segmentation disagree")
         object.__setattr__(self, "labels", labels)

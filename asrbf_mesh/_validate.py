@@ -182,6 +182,15 @@ def float_array(value: Any, name: str, what: str = "an array of numbers") -> np.
         raise ScanError(f"{name} must be {what}, got {type(value).__name__}") from None
 
 
+def readonly(arr: np.ndarray, source: object = None) -> np.ndarray:
+    """Return ``arr`` made read-only, copied first if it may alias a writeable ``source``."""
+    if isinstance(source, np.ndarray) and source.flags.writeable and \
+            np.may_share_memory(arr, source):
+        arr = arr.copy()
+    arr.flags.writeable = False
+    return arr
+
+
 def check_points(points: Any, name: str = "points", *, min_points: int = 1,
                  columns: int = 3) -> np.ndarray:
     """Return ``points`` as a C-contiguous float64 ``(N, columns)`` array of finite values.
