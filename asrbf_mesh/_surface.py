@@ -127,7 +127,7 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     nx = max(int(round((hi[0] - lo[0]) / step)) + 1, 2)
     ny = max(int(round((hi[1] - lo[1]) / step)) + 1, 2)
     if nx * ny > 50_000_000:
-        raise ConfigError(f"a {nx} x {ny} grid is too large; raise spacing_abs or lower "
+        raise ConfigError(f"a {nx} x {ny} grid is too large; raise spacing or lower "
                           "resolution")
     gx = np.linspace(lo[0], hi[0], nx)
     gy = np.linspace(lo[1], hi[1], ny)

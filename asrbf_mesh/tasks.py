@@ -185,12 +185,9 @@ def reconstruct(network: str | os.PathLike, output: str | os.PathLike, *,
                        footprint=footprint)
     net = Network.load(network)
     fp = load_scan(footprint) if footprint else None
-    try:
-        mesh = mesh_network(net, resolution=resolution, spacing_abs=spacing, footprint=fp,
-                            mode=mode, margin_rel=margin)
-    except AsrbfError as exc:  # the library's argument names to the command's
-        text = str(exc).replace("spacing_abs", "spacing").replace("margin_rel", "margin")
-        raise type(exc)(text) from None
+    # the arguments were checked above under the command's names
+    mesh = mesh_network(net, resolution=resolution, spacing_abs=spacing, footprint=fp,
+                        mode=mode, margin_rel=margin)
     save_mesh(mesh, output, overwrite_inputs=(network, footprint))
     return jsonable({"output": str(output), "vertices": mesh.n_vertices,
                      "faces": mesh.n_faces})
