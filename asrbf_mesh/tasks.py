@@ -48,10 +48,6 @@ REPORT_FILES = ("summary.json", "summary.md", "summary.html")
 _LEARNING_FIELDS = tuple(f.name for f in dataclasses.fields(FitConfig))
 
 
-def _check_bool(value: Any, name: str) -> bool:
-    return bool(check_bool(value, name))
-
-
 def _progress(value: Any) -> bool | None:
     return check_bool(value, "progress", allow_none=True)
 
@@ -93,8 +89,8 @@ def _check_fit(*, seed: int, view_axis: str, float32: bool, stream: bool, chunk:
     cfg = FitConfig().replace(**{k: v for k, v in learning.items() if v is not None})
     check_seed(seed)
     check_choice(view_axis, "view_axis", VIEW_AXES)
-    _check_bool(float32, "float32")
-    _check_bool(stream, "stream")
+    check_bool(float32, "float32")
+    check_bool(stream, "stream")
     _progress(progress)
     for name, value in (("chunk", chunk), ("mix", mix)):
         if value is None:
@@ -233,8 +229,8 @@ def _check_lod(*, levels: int, method: str, compare_qem: bool, metro: bool,
                seed: int) -> None:
     check_int(levels, "levels", 1, MAX_LEVELS)
     check_choice(method, "method", LOD_METHODS)
-    _check_bool(compare_qem, "compare_qem")
-    _check_bool(metro, "metro")
+    check_bool(compare_qem, "compare_qem")
+    check_bool(metro, "metro")
     check_seed(seed)
 
 
@@ -303,7 +299,7 @@ def metro(mesh: str | os.PathLike, reference: str | os.PathLike, *, samples: int
 def _check_compare(*, network: Any, holes: bool, lod: bool, meshes: bool,
                    som_iterations: int | None, seed: int, progress: bool | None) -> None:
     for name, value in (("holes", holes), ("lod", lod), ("meshes", meshes)):
-        _check_bool(value, name)
+        check_bool(value, name)
     if som_iterations is not None:
         check_int(som_iterations, "som_iterations", 1)
     check_seed(seed)
