@@ -21,7 +21,6 @@ sizes and Metro-style errors against the scan, optionally beside quadric-decimat
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import tempfile
 import time
@@ -112,7 +111,7 @@ class LodLevel:
 
 def _shippable(net: Network) -> Network:
     """Return the network as shipped: without its learning log (saved as float32)."""
-    return dataclasses.replace(net, log=None)
+    return net.without_logs()
 
 
 def _save_network(net: Network, path: Path, inputs: tuple[str, ...] = ()) -> Path:

@@ -1,108 +1,32 @@
-"""The fitted Gaussian RBF network: evaluation, statistics and the ``.asrbf`` file.
+"""The fitted model of a scan: one Gaussian RBF network per smooth piece, in one frame.
 
-``f(x) = a0 + sum_k a_k exp(-||x - u_k||^2 / sigma_k^2)`` (paper, eqs. 1-2), learned
-in the unit square; :class:`Network` evaluates it in physical units through its
-:class:`~asrbf_mesh._frame.Frame`.
+Each piece is ``f(x) = a0 + sum_k a_k exp(-||x - u_k||^2 / sigma_k^2)`` (paper, eqs. 1-2),
+learned in the unit square (:class:`~asrbf_mesh._piece.Piece`); :class:`Network` finds
+the piece owning a point (:class:`~asrbf_mesh._piece_map.PieceMap`) and evaluates it in
+physical units through its :class:`~asrbf_mesh._frame.Frame`. A single network is a
+one-piece model.
 """
 
 from __future__ import annotations
 
-import io
-import json
+import dataclasses
 import os
-import zipfile
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import _network_kernels as _nk
-from ._atomic import atomic_path, check_output_path
 from ._config import FitConfig
 from ._frame import Frame
-from ._validate import check_float, check_int, one_line
-from .errors import AsrbfError, ConfigError, NetworkFileError, ScanError
+from ._network_file import FORMAT_NAME, FORMAT_VERSION, VOLATILE_INFO, read_network, write_network
+from ._piece import FitLog, Piece, eval_grid, eval_unit
+from ._piece_map import PieceMap
+from ._validate import check_float, check_int, plural, readonly
+from .errors import ConfigError, ScanError
 
-__all__ = ["Network", "FitInfo", "FitLog", "NeuronStats", "FORMAT_NAME", "FORMAT_VERSION"]
-
-FORMAT_NAME = "asrbf-network"
-FORMAT_VERSION = 1
-_ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member dates: same network, same bytes
-# wall-clock figures stay in memory only: the same seed must give the same file
-VOLATILE_INFO = ("fit_seconds", "learn_seconds", "polish_seconds", "us_per_step")
-
-
-def eval_grid(centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
-              support: float) -> tuple:
-    """Build the static evaluation grid ``(support, lo, h, g, start, items, packed)``.
-
-    Cells are about the size of a median truncated support (at most 512 per axis)
-    over the unit square extended to every centre.
-    """
-    if len(widths):
-        lo = np.minimum(centers.min(axis=0), 0.0)
-        hi = np.maximum(centers.max(axis=0), 1.0)
-        cell = max(float(np.median(widths)) * support, float((hi - lo).max()) / 512)
-    else:
-        lo, hi, cell = np.zeros(2), np.ones(2), 1.0
-    g = max(1, int(np.ceil(float((hi - lo).max()) / cell)))
-    h = float((hi - lo).max()) / g
-    lo = np.ascontiguousarray(lo, dtype=np.float64)
-    start, items = _nk.build_grid(centers, widths, support, lo, h, g)
-    packed = _nk.pack_cells(centers, widths, weights, items)
-    return support, lo, h, g, start, items, packed
-
-
-def eval_unit(grid: tuple, uv: np.ndarray, a0: float, centers: np.ndarray, widths: np.ndarray,
-              weights: np.ndarray, want_grad: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Evaluate f (and optionally its gradient) at unit-square points through a grid."""
-    s, lo, h, g, start, items, packed = grid
-    uv = np.ascontiguousarray(uv, dtype=np.float64)
-    if not want_grad:
-        return _nk.evaluate_values(uv, a0, packed, s, lo, h, g, start), np.zeros((0, 2))
-    return _nk.evaluate_with_gradient(uv, a0, centers, widths, weights, s, lo, h, g, start, items)
-
-
-@dataclass(frozen=True, eq=False)
-class FitLog:
-    """Learning history sampled at a fixed stride (paper, Figs. 6 and 9).
-
-    Parameters
-    ----------
-    step : (L,) int64 array
-        Observation index n of each record.
-    n_neurons : (L,) int64 array
-        K at that step.
-    rms : (L,) float64 array
-        Windowed RMS error e_n^omega (eq. 6), unit cube.
-    mean_width, mean_weight : (L,) float64 arrays
-        Mean sigma and mean |a| over the alive neurons (0 while there is none).
-    added, pruned, reset, diverged : int
-        Neurons added, pruned, covariance blocks reset and neurons removed by the
-        numerical guard over the whole run.
-    capped : int
-        Insertions the neuron cap (``FitConfig.max_neurons``) refused: the three novelty
-        criteria held but K was at the cap.
-    """
-
-    step: np.ndarray
-    n_neurons: np.ndarray
-    rms: np.ndarray
-    mean_width: np.ndarray
-    mean_weight: np.ndarray
-    added: int = 0
-    pruned: int = 0
-    reset: int = 0
-    diverged: int = 0
-    capped: int = 0
-
-    _ARRAYS = ("step", "n_neurons", "rms", "mean_width", "mean_weight")
-
-    def counters(self) -> dict[str, int]:
-        """Return the scalar counters as a dict."""
-        return {"added": self.added, "pruned": self.pruned, "reset": self.reset,
-                "diverged": self.diverged, "capped": self.capped}
+__all__ = ["Network", "Piece", "FitInfo", "FitLog", "NeuronStats", "FORMAT_NAME",
+           "FORMAT_VERSION", "eval_grid", "eval_unit"]
 
 
 @dataclass(frozen=True)
@@ -236,9 +160,19 @@ class NeuronStats:
                                                          else None))
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class Network:
-    """An immutable, picklable Gaussian RBF network fitted to a height field.
+    """An immutable, picklable Gaussian RBF model of a scan: one network per smooth piece.
+
+    A range scan is piecewise smooth (occlusion cliffs, walls seen edge-on, fragments),
+    so a model holds one :class:`Piece` per smooth piece, all in one frame (the whole
+    scan's unit cube), and a :class:`~asrbf_mesh._piece_map.PieceMap` telling which piece
+    owns each point of the view plane. A single network (the paper's model, ``--pieces
+    1``) is a one-piece model without a map: ``Network(a0, centers, widths, weights,
+    frame, config)`` builds one; :meth:`from_pieces` builds a piecewise one.
+
+    Evaluation (:meth:`evaluate`, :meth:`gradient`, :meth:`normals`,
+    :meth:`surface_points`) takes the piece to use, or finds it from the map.
 
     Parameters
     ----------
@@ -268,65 +202,132 @@ class Network:
     ...               Frame(np.eye(3), np.zeros(3), np.ones(3)), FitConfig())
     >>> float(net.evaluate(np.array([[0.5, 0.5]]))[0])
     0.75
+    >>> net.n_pieces
+    1
     """
 
-    a0: float
-    centers: np.ndarray
-    widths: np.ndarray
-    weights: np.ndarray
+    pieces: tuple[Piece, ...]
     frame: Frame
     config: FitConfig
-    log: FitLog | None = None
-    info: dict[str, Any] = field(default_factory=dict)
+    info: dict[str, Any]
+    piece_map: PieceMap | None
 
-    def __post_init__(self) -> None:
-        try:
-            c = np.array(self.centers, dtype=np.float64)
-            w = np.array(self.widths, dtype=np.float64).reshape(-1)
-            a = np.array(self.weights, dtype=np.float64).reshape(-1)
-            a0 = float(self.a0)
-        except (TypeError, ValueError):
-            raise ConfigError("a0, centers, widths and weights must be numbers") from None
-        if c.size == 0:
-            c = c.reshape(0, 2)
-        if c.ndim != 2 or c.shape[1] != 2:
-            raise ConfigError(f"centers must have shape (K, 2), got {c.shape}")
-        k = len(c)
-        if len(w) != k or len(a) != k:
-            raise ConfigError(f"centers ({k}), widths ({len(w)}) and weights ({len(a)}) differ")
-        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(w)) and np.all(np.isfinite(a))
-                and np.isfinite(a0)):
-            raise ConfigError("network parameters must be finite")
-        if np.any(w <= 0):
-            raise ConfigError("widths must be positive")
-        if not isinstance(self.frame, Frame):
-            raise ConfigError(f"frame must be a Frame, got {type(self.frame).__name__}")
-        if not isinstance(self.config, FitConfig):
-            raise ConfigError(f"config must be a FitConfig, got {type(self.config).__name__}")
-        if self.log is not None and not isinstance(self.log, FitLog):
-            raise ConfigError(f"log must be a FitLog or None, got {type(self.log).__name__}")
-        if not isinstance(self.info, dict):
-            raise ConfigError(f"info must be a dict, got {type(self.info).__name__}")
-        for name, arr in (("centers", c), ("widths", w), ("weights", a)):
-            arr.flags.writeable = False
-            object.__setattr__(self, name, arr)
-        object.__setattr__(self, "a0", a0)
+    def __init__(self, a0: float, centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
+                 frame: Frame, config: FitConfig, log: FitLog | None = None,
+                 info: dict[str, Any] | None = None) -> None:
+        self._assign((Piece(a0, centers, widths, weights, log),), frame, config,
+                     {} if info is None else info, None)
 
-    # -- pickling: drop the evaluation grid cache ------------------------------------------
+    @classmethod
+    def from_pieces(cls, pieces: Any, frame: Frame, config: FitConfig,
+                    info: dict[str, Any] | None = None,
+                    piece_map: PieceMap | None = None) -> Network:
+        """Build a model of several pieces (a map is needed to tell them apart).
+
+        Raises
+        ------
+        ConfigError
+            No piece, a piece that is not a :class:`Piece`, or a map missing or naming
+            pieces the model lacks.
+        """
+        pieces = tuple(pieces)
+        if not pieces or not all(isinstance(p, Piece) for p in pieces):
+            raise ConfigError("pieces must be a non-empty sequence of Piece")
+        if len(pieces) > 1 and not isinstance(piece_map, PieceMap):
+            raise ConfigError(f"a model of {len(pieces)} pieces needs a PieceMap")
+        if piece_map is not None and piece_map.n_pieces > len(pieces):
+            raise ConfigError(f"the piece map names piece {piece_map.n_pieces - 1}, the "
+                              f"model has {plural(len(pieces), 'piece')}")
+        obj = cls.__new__(cls)
+        obj._assign(pieces, frame, config, {} if info is None else info,
+                    piece_map if len(pieces) > 1 else None)
+        return obj
+
+    def _assign(self, pieces: tuple[Piece, ...], frame: Frame, config: FitConfig,
+                info: dict[str, Any], piece_map: PieceMap | None) -> None:
+        if not isinstance(frame, Frame):
+            raise ConfigError(f"frame must be a Frame, got {type(frame).__name__}")
+        if not isinstance(config, FitConfig):
+            raise ConfigError(f"config must be a FitConfig, got {type(config).__name__}")
+        if not isinstance(info, dict):
+            raise ConfigError(f"info must be a dict, got {type(info).__name__}")
+        for name, value in (("pieces", pieces), ("frame", frame), ("config", config),
+                            ("info", info), ("piece_map", piece_map)):
+            object.__setattr__(self, name, value)
+
+    # -- pickling: drop cached arrays ------------------------------------------------------
     def __getstate__(self) -> dict[str, Any]:
-        state = dict(self.__dict__)
-        state.pop("_grid", None)
-        return state
+        return {k: v for k, v in self.__dict__.items() if not k.startswith("_")}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
 
-    # -- sizes ------------------------------------------------------------------------------
+    # -- parameters -------------------------------------------------------------------------
+    @property
+    def n_pieces(self) -> int:
+        """Number of pieces (1 for the paper's single network)."""
+        return len(self.pieces)
+
     @property
     def n_neurons(self) -> int:
-        """K, the number of Gaussian neurons."""
-        return int(len(self.widths))
+        """K, the Gaussian neurons of all pieces."""
+        return sum(p.n_neurons for p in self.pieces)
 
+    @property
+    def a0(self) -> float:
+        """The bias of a one-piece network (each piece has its own: ``pieces[i].a0``)."""
+        if self.n_pieces > 1:
+            raise ConfigError(f"a model of {self.n_pieces} pieces has one a0 per piece: "
+                              "use pieces[i].a0")
+        return self.pieces[0].a0
+
+    def _joined(self, name: str) -> np.ndarray:
+        if self.n_pieces == 1:
+            return getattr(self.pieces[0], name)
+        key = f"_{name}"
+        arr = self.__dict__.get(key)
+        if arr is None:
+            arr = readonly(np.concatenate([getattr(p, name) for p in self.pieces]))
+            object.__setattr__(self, key, arr)
+        return arr
+
+    @property
+    def centers(self) -> np.ndarray:
+        """(K, 2) neuron centres of all pieces, piece after piece (read-only)."""
+        return self._joined("centers")
+
+    @property
+    def widths(self) -> np.ndarray:
+        """(K,) widths of all pieces, piece after piece (read-only)."""
+        return self._joined("widths")
+
+    @property
+    def weights(self) -> np.ndarray:
+        """(K,) weights of all pieces, piece after piece (read-only)."""
+        return self._joined("weights")
+
+    @property
+    def log(self) -> FitLog | None:
+        """The learning history of a one-piece network (pieces: ``pieces[i].log``)."""
+        return self.pieces[0].log if self.n_pieces == 1 else None
+
+    def without_logs(self) -> Network:
+        """Return the model without the pieces' learning logs (as a LOD set ships it)."""
+        pieces = tuple(dataclasses.replace(p, log=None) for p in self.pieces)
+        return Network.from_pieces(pieces, self.frame, self.config, self.info, self.piece_map)
+
+    def log_counters(self) -> dict[str, int] | None:
+        """Neurons added, pruned, ... summed over the pieces; None without any log."""
+        logs = [p.log for p in self.pieces if p.log is not None]
+        if not logs:
+            return None
+        total: dict[str, int] = {}
+        for lg in logs:
+            for k, v in lg.counters().items():
+                total[k] = total.get(k, 0) + v
+        return total
+
+    # -- sizes ------------------------------------------------------------------------------
     @property
     def fit_info(self) -> FitInfo | None:
         """The fit figures of ``info`` as a :class:`FitInfo`; None without fit figures."""
@@ -336,7 +337,7 @@ class Network:
             return None
 
     def compression_ratio(self, n_points: int | None = None) -> float:
-        """N : K, points per neuron (paper, Table 2)."""
+        """N : K, points per neuron over all pieces (paper, Table 2)."""
         n = self._n_points(n_points)
         return n / max(self.n_neurons, 1)
 
@@ -353,7 +354,7 @@ class Network:
         return int(self.info["n_points"])
 
     def stats(self) -> NeuronStats:
-        """Width and |weight| statistics (the paper's Table 1 reports |a|)."""
+        """Width and |weight| statistics over all pieces (the paper's Table 1 reports |a|)."""
         w = self.widths
         a = np.abs(self.weights)
         if self.n_neurons == 0:
@@ -363,16 +364,46 @@ class Network:
                            float(a.std()))
 
     # -- evaluation -------------------------------------------------------------------------
-    def _grid_arrays(self) -> tuple:
-        cached = self.__dict__.get("_grid")
-        if cached is None:
-            cached = eval_grid(self.centers, self.widths, self.weights, self.config.support)
-            object.__setattr__(self, "_grid", cached)
-        return cached
+    def piece_at(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+        """Piece owning each (M, 2) point of the view plane, (M,) int64 (see :meth:`evaluate`)."""
+        pts = self._points(xy)
+        uv = pts if unit else self.frame.xy_to_unit(pts)
+        return self._piece_of(uv, None)
 
-    def _eval_unit(self, uv: np.ndarray, want_grad: bool) -> tuple[np.ndarray, np.ndarray]:
-        return eval_unit(self._grid_arrays(), uv, self.a0, self.centers, self.widths,
-                         self.weights, want_grad)
+    def _piece_of(self, uv: np.ndarray, piece: Any) -> np.ndarray:
+        if piece is None:
+            if self.piece_map is None:
+                return np.zeros(len(uv), dtype=np.int64)
+            return self.piece_map.piece_at(uv)
+        arr = np.asarray(piece)
+        if arr.ndim == 0:
+            arr = np.full(len(uv), check_int(piece, "piece", 0, self.n_pieces - 1))
+        elif arr.shape != (len(uv),) or arr.dtype.kind not in "iu":
+            raise ConfigError(f"piece must be an int or one int per point ({len(uv)}), got "
+                              f"an array of shape {arr.shape} and type {arr.dtype}")
+        elif len(arr) and (arr.min() < 0 or arr.max() >= self.n_pieces):
+            raise ConfigError(f"piece must be in [0, {self.n_pieces - 1}]")
+        return arr.astype(np.int64)
+
+    def _eval_unit(self, uv: np.ndarray, want_grad: bool,
+                   piece: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        uv = np.ascontiguousarray(uv, dtype=np.float64)
+        support = self.config.support
+        if self.n_pieces == 1 and piece is None:
+            return self.pieces[0].eval_unit(uv, support, want_grad)
+        owner = self._piece_of(uv, piece)
+        f = np.empty(len(uv))
+        grad = np.zeros((len(uv) if want_grad else 0, 2))
+        order = np.argsort(owner, kind="stable")
+        bounds = np.searchsorted(owner[order], np.arange(self.n_pieces + 1))
+        for i, p in enumerate(self.pieces):
+            idx = order[bounds[i]:bounds[i + 1]]
+            if idx.size:
+                fi, gi = p.eval_unit(np.ascontiguousarray(uv[idx]), support, want_grad)
+                f[idx] = fi
+                if want_grad:
+                    grad[idx] = gi
+        return f, grad
 
     @staticmethod
     def _points(xy: np.ndarray) -> np.ndarray:
@@ -383,7 +414,7 @@ class Network:
             raise ScanError("xy contains NaN or infinite values")
         return arr
 
-    def evaluate(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+    def evaluate(self, xy: np.ndarray, *, unit: bool = False, piece: Any = None) -> np.ndarray:
         """Depth of the surface at (M, 2) points.
 
         Parameters
@@ -393,6 +424,9 @@ class Network:
             are the world x and y), or in the unit square if ``unit``.
         unit : bool
             Work in the unit cube (inputs and output) instead of physical units.
+        piece : int or (M,) int array, optional
+            The piece to evaluate (one for all points, or one per point); default the
+            piece owning each point (:meth:`piece_at`).
 
         Returns
         -------
@@ -401,28 +435,29 @@ class Network:
         """
         pts = self._points(xy)
         uv = pts if unit else self.frame.xy_to_unit(pts)
-        f, _ = self._eval_unit(np.ascontiguousarray(uv), False)
+        f, _ = self._eval_unit(uv, False, piece)
         if unit:
             return f
         return f * self.frame.scale[2] + self.frame.offset[2]
 
-    def gradient(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+    def gradient(self, xy: np.ndarray, *, unit: bool = False, piece: Any = None) -> np.ndarray:
         """Analytic gradient d depth / d(x, y), (M, 2), in the units of :meth:`evaluate`."""
         pts = self._points(xy)
         uv = pts if unit else self.frame.xy_to_unit(pts)
-        _, grad = self._eval_unit(np.ascontiguousarray(uv), True)
+        _, grad = self._eval_unit(uv, True, piece)
         if unit:
             return grad
         return grad * (self.frame.scale[2] / self.frame.scale[:2])
 
-    def surface_points(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+    def surface_points(self, xy: np.ndarray, *, unit: bool = False,
+                       piece: Any = None) -> np.ndarray:
         """World (M, 3) points of the surface above local (x, y) (or unit-square) points."""
         pts = self._points(xy)
         uv = pts if unit else self.frame.xy_to_unit(pts)
-        f, _ = self._eval_unit(np.ascontiguousarray(uv), False)
+        f, _ = self._eval_unit(uv, False, piece)
         return self.frame.to_world(np.column_stack([uv, f]))
 
-    def normals(self, xy: np.ndarray, *, unit: bool = False) -> np.ndarray:
+    def normals(self, xy: np.ndarray, *, unit: bool = False, piece: Any = None) -> np.ndarray:
         """Return unit surface normals in world coordinates, (M, 3), facing +depth.
 
         From the analytic gradient: ``n ~ (-dz/dx, -dz/dy, 1)`` in the local physical
@@ -430,7 +465,7 @@ class Network:
         """
         pts = self._points(xy)
         uv = pts if unit else self.frame.xy_to_unit(pts)
-        _, grad = self._eval_unit(np.ascontiguousarray(uv), True)
+        _, grad = self._eval_unit(uv, True, piece)
         gp = grad * (self.frame.scale[2] / self.frame.scale[:2])
         n = np.column_stack([-gp[:, 0], -gp[:, 1], np.ones(len(gp))])
         n /= np.linalg.norm(n, axis=1, keepdims=True)
@@ -439,11 +474,11 @@ class Network:
     # -- file -------------------------------------------------------------------------------
     def save(self, path: str | os.PathLike, *, float32: bool = False,
              inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
-        """Write a versioned ``.asrbf`` file atomically.
+        """Write a versioned ``.asrbf`` file (format 2) atomically.
 
         The file is a zip of ``.npy`` members (loadable with ``numpy.load``) with fixed
         member dates and without the timings of ``info`` (:data:`VOLATILE_INFO`), so the
-        same network always gives the same bytes.
+        same network always gives the same bytes (format: ``docs/design.md``).
 
         Parameters
         ----------
@@ -454,99 +489,21 @@ class Network:
         inputs : paths
             Input files the output must not overwrite.
         """
-        out = check_output_path(path, *inputs)
-        dt = np.float32 if float32 else np.float64
-        meta = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION,
-                "dtype": np.dtype(dt).name, "frame": self.frame.to_dict(),
-                "config": self.config.to_dict(),
-                "info": {k: v for k, v in self.info.items() if k not in VOLATILE_INFO},
-                "log_counters": self.log.counters() if self.log else None}
-        members: dict[str, np.ndarray] = {
-            "meta": np.frombuffer(json.dumps(meta, sort_keys=True).encode(), dtype=np.uint8),
-            "a0": np.array([self.a0], dtype=np.float64),
-            "centers": self.centers.astype(dt),
-            "widths": self.widths.astype(dt),
-            "weights": self.weights.astype(dt),
-        }
-        if self.log is not None:
-            for name in FitLog._ARRAYS:
-                members[f"log_{name}"] = np.asarray(getattr(self.log, name))
-        with atomic_path(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
-            for name, arr in members.items():
-                buf = io.BytesIO()
-                np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
-                zi = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_DATE)
-                zi.compress_type = zipfile.ZIP_DEFLATED
-                zi.external_attr = 0o644 << 16
-                zf.writestr(zi, buf.getvalue())
-        return out
+        return write_network(path, self.pieces, self.frame, self.config, self.info,
+                             self.piece_map, float32=float32, inputs=inputs)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Network:
-        """Read a ``.asrbf`` file written by :meth:`save`.
+        """Read a ``.asrbf`` file (format 1 or 2).
 
         Raises
         ------
         NetworkFileError
             Missing, unreadable, foreign, corrupt or version-mismatched file.
         """
-        p = Path(path)
-        if not p.exists():
-            raise NetworkFileError(f"{p}: no such file")
-        if p.is_dir():
-            raise NetworkFileError(f"{p}: is a directory, not a network file")
-        try:
-            with open(p, "rb") as fh:
-                magic = fh.read(4)
-        except OSError as exc:
-            raise NetworkFileError(f"{p}: cannot read ({exc.strerror})") from None
-        if not magic:
-            raise NetworkFileError(f"{p}: not an asrbf network file (empty file, 0 bytes)")
-        try:
-            with zipfile.ZipFile(p) as zf:
-                names = set(zf.namelist())
-                if "meta.npy" not in names:
-                    raise NetworkFileError(f"{p}: not an asrbf network file (no metadata)")
-                arrays = {}
-                for name in names:
-                    if name.endswith(".npy"):
-                        with zf.open(name) as fh:
-                            arrays[name[:-4]] = np.lib.format.read_array(
-                                io.BytesIO(fh.read()), allow_pickle=False)
-        except NetworkFileError:
-            raise
-        except zipfile.BadZipFile:
-            if magic == b"PK\x03\x04":  # starts like a zip: damaged or cut short
-                raise NetworkFileError(
-                    f"{p}: corrupt or truncated network file (the zip archive is damaged)"
-                ) from None
-            raise NetworkFileError(f"{p}: not an asrbf network file (not a zip archive)") from None
-        except OSError as exc:
-            raise NetworkFileError(f"{p}: cannot read ({exc.strerror or one_line(exc)})") from None
-        except Exception as exc:  # corrupt member, truncated data, ...
-            raise NetworkFileError(f"{p}: corrupt network file ({one_line(exc)})") from None
-        try:
-            meta = json.loads(bytes(arrays["meta"]).decode())
-        except Exception:
-            raise NetworkFileError(f"{p}: corrupt network file (unreadable metadata)") from None
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
-            raise NetworkFileError(f"{p}: not an asrbf network file")
-        version = meta.get("format_version")
-        if version != FORMAT_VERSION:
-            raise NetworkFileError(
-                f"{p}: network file format version {version!r} is not supported "
-                f"(this asrbf-mesh reads version {FORMAT_VERSION})")
-        try:
-            log = None
-            if "log_step" in arrays:
-                counters = meta.get("log_counters") or {}
-                log = FitLog(*(arrays[f"log_{n}"] for n in FitLog._ARRAYS),
-                             **{k: int(v) for k, v in counters.items()})
-            a0 = np.asarray(arrays["a0"], dtype=np.float64).reshape(-1)
-            if a0.shape != (1,):
-                raise ValueError("a0 must hold one value")
-            return cls(float(a0[0]), arrays["centers"], arrays["widths"],
-                       arrays["weights"], Frame.from_dict(meta["frame"]),
-                       FitConfig.from_dict(meta["config"]), log, dict(meta.get("info") or {}))
-        except (KeyError, ValueError, TypeError, AsrbfError) as exc:
-            raise NetworkFileError(f"{p}: corrupt network file ({one_line(exc)})") from None
+        pieces, frame, config, info, piece_map = read_network(path)
+        return cls.from_pieces(pieces, frame, config, info, piece_map)
+
+    def __repr__(self) -> str:
+        return (f"Network({plural(self.n_neurons, 'neuron')} in "
+                f"{plural(self.n_pieces, 'piece')}, N = {self.info.get('n_points', '?')})")

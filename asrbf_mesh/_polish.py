@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import cg, spsolve
 
 from . import _network_kernels as _nk
-from ._network import eval_grid, eval_unit
+from ._piece import eval_grid, eval_unit
 
 __all__ = ["PolishResult", "polish_weights", "polish_weights_blocks", "polish_full",
            "design_matrix"]

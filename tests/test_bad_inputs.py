@@ -338,8 +338,8 @@ NETWORK_MESSAGES = {
     "empty file": "not an asrbf network file (empty file, 0 bytes)",
     "truncated": "corrupt or truncated network file (the zip archive is damaged)",
     "damaged member": "corrupt network file (",
-    "format version 99": (f"network file format version 99 is not supported (this "
-                          f"asrbf-mesh reads version {FORMAT_VERSION})"),
+    "format version 99": ("network file format version 99 is not supported (this "
+                          "asrbf-mesh reads versions 1, 2)"),
     "NaN parameter": "corrupt network file (network parameters must be finite)",
     "plain .npz": "not an asrbf network file (no metadata)",
     "zip of something else": "not an asrbf network file (no metadata)",

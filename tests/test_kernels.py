@@ -360,7 +360,10 @@ def test_network_evaluate_and_gradient_match_brute_force(seed: int) -> None:
 
 def test_build_grid_cells_hold_every_neuron_reaching_them() -> None:
     net = random_network(3)
-    s, lo, h, g, start, items = net._grid_arrays()[:6]  # (support, lo, h, g, start, items, ...)
+    from asrbf_mesh._piece import eval_grid
+
+    grid = eval_grid(net.centers, net.widths, net.weights, net.config.support)
+    s, lo, h, g, start, items = grid[:6]  # (support, lo, h, g, start, items, packed)
     assert start[0] == 0 and start[-1] == len(items)
     assert np.all(np.diff(start) >= 0)
     for c in range(g * g):  # no duplicates in any cell list
