@@ -49,7 +49,7 @@ _EXPORTS: dict[str, str] = {
     "NeuronCapWarning": "_learn",
     "OutlierWarning": "_outliers",
     "isolated_points": "_outliers",
-    "fit": "_learn",
+    "fit": "_fit",
     "learn": "_learn",
     "LodLevel": "_lod",
     "lod_set": "_lod",
@@ -58,6 +58,8 @@ _EXPORTS: dict[str, str] = {
     "FitInfo": "_network",
     "FitLog": "_network",
     "Network": "_network",
+    "Piece": "_piece",
+    "PieceMap": "_piece_map",
     "NeuronStats": "_network",
     "block_order": "_stream",
     "fit_stream": "_stream",
@@ -73,6 +75,7 @@ __all__ = ["__version__", "AsrbfError", "ConfigError", "FitError", "NetworkFileE
 
 if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on demand
     from ._config import FitConfig
+    from ._fit import fit
     from ._footprint import Footprint
     from ._frame import (
         DuplicatePointsWarning,
@@ -83,11 +86,13 @@ if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on d
     )
     from ._holes import FillResult, HoleInfo, fill_holes
     from ._io import face_map_path, load_scan, save_mesh
-    from ._learn import LearnedState, NeuronCapWarning, fit, learn
+    from ._learn import LearnedState, NeuronCapWarning, learn
     from ._lod import LodLevel, lod_set
     from ._mesh import Mesh, Scan
     from ._network import FitInfo, FitLog, Network, NeuronStats
     from ._outliers import OutlierWarning, isolated_points
+    from ._piece import Piece
+    from ._piece_map import PieceMap
     from ._segment import Segmentation, segment
     from ._stream import block_order, fit_stream
     from ._surface import reconstruct

@@ -28,6 +28,8 @@ VIEW_AXES = ("z", "x", "y", "pca")
 BLENDS = ("thin-plate", "harmonic")
 #: Footprint modes of ``reconstruct``.
 FOOTPRINT_MODES = ("scan", "hull", "full")
+#: ``pieces`` of a fit: "auto" (one network per smooth piece) or "1" (one network).
+PIECES = ("auto", "1")
 #: LOD methods of ``lod_set``.
 LOD_METHODS = ("resample", "refit")
 

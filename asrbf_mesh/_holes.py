@@ -183,7 +183,7 @@ def _as_scan(scan: Any) -> Scan:
 def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
                max_hole_size: str | float | None = None, blend: str = "thin-plate",
                lowpass_rel: float | None = 1.0, seed: int = 0,
-               progress: bool | None = None) -> FillResult:
+               progress: bool | None = None, pieces: str | int = "auto") -> FillResult:
     """Fill the holes of a range scan with the network's surface.
 
     Parameters
@@ -214,6 +214,9 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         Seed of the fit when ``net`` is omitted.
     progress : bool, optional
         Progress bar of the fit.
+    pieces : "auto" or 1
+        The fit made when ``net`` is omitted: one network per smooth piece (``"auto"``)
+        or the paper's single network (see :func:`~asrbf_mesh.fit`).
 
     Returns
     -------
@@ -244,9 +247,9 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     diag = scan.bbox_diagonal
     limit = parse_length(max_hole_size, diag, "max_hole_size")
     if net is None:
-        from ._learn import fit
+        from ._fit import fit
 
-        net = fit(scan, seed=seed, progress=progress)
+        net = fit(scan, seed=seed, pieces=pieces, progress=progress)
     R = net.frame.rotation
     local = scan.points @ R
     xy = np.ascontiguousarray(local[:, :2])

@@ -35,15 +35,13 @@ import numpy as np
 from . import _learn_kernels as _lk
 from . import _validate
 from ._config import FitConfig
-from ._frame import HeightField, HeightFieldWarning, to_height_field
-from ._io import Scan
+from ._frame import HeightField, HeightFieldWarning
 from ._network import FitInfo, FitLog, Network
-from ._outliers import OutlierWarning, describe_isolated, isolated_points
-from ._validate import check_points, check_seed
+from ._validate import check_seed
 from ._version import __version__
 from .errors import FitError, ScanError
 
-__all__ = ["fit", "learn", "learn_from", "auto_d_min", "residuals", "fit_info", "MIN_POINTS",
+__all__ = ["learn", "learn_from", "auto_d_min", "residuals", "fit_info", "MIN_POINTS",
            "LearnedState", "NeuronCapWarning", "learn_polished"]
 
 
@@ -400,91 +398,3 @@ def learn_polished(hf: HeightField, cfg: FitConfig, polish: str, *, seed: int,
     if pr is not None:
         a0, centers, widths, weights = pr.a0, pr.centers, pr.widths, pr.weights
     return learned, pr, (a0, centers, widths, weights), time.perf_counter() - tp
-
-
-def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int = 0,
-        view_axis: str = "z", progress: bool | None = None,
-        order: Callable[[np.random.Generator], np.ndarray] | None = None,
-        **overrides: Any) -> Network:
-    """Fit an ASRBF network to a range scan: learning, then the optional polish.
-
-    Parameters
-    ----------
-    scan : Scan or (N, 3) array
-        The scan points in world units.
-    config : FitConfig, optional
-        Learning parameters; paper defaults (section 5.1) with D_min from the data.
-    seed : int
-        Random replay order; the same seed gives the same network bit for bit.
-    view_axis : {"z", "x", "y", "pca"}
-        Depth direction of the height field.
-    progress : bool, optional
-        Progress bar on stderr (default: on a terminal, for fits over a second).
-    order : callable, optional
-        The replay order of each pass, see :func:`learn` (default: a uniform random
-        permutation per pass).
-    **overrides
-        FitConfig fields to change, e.g. ``passes=3``.
-
-    Returns
-    -------
-    Network
-        With ``info`` holding ``n_points``, ``ebar`` (mean |f - z| in the unit cube),
-        ``error_mean`` / ``error_std`` (|depth error| in scan units), ``steps``,
-        timings and provenance (typed: ``net.fit_info``, a :class:`FitInfo`). When most
-        points fold over along the view axis (a closed mesh: no height field), the
-        polish is skipped with a :class:`HeightFieldWarning` (see :func:`polish_kind`).
-
-    Raises
-    ------
-    ScanError
-        Unusable points (too few, NaN, zero x or y extent).
-    FitError
-        The GEKF updater would need more than 2,000 neurons.
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> xy = rng.random((3000, 2))
-    >>> pts = np.c_[xy, np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])]
-    >>> net = fit(pts, seed=0, progress=False)
-    >>> bool(net.info["ebar"] < 0.01)
-    True
-    """
-    seed = check_seed(seed)
-    cfg = (config or FitConfig()).replace(**overrides) if overrides else (config or FitConfig())
-    if isinstance(scan, Scan):
-        points, source = scan.points, scan.source
-    else:
-        points, source = check_points(scan, "points"), None
-    named = f"{source}: " if source else ""
-    if len(points) < MIN_POINTS:
-        raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points, got {len(points)}")
-    stray = isolated_points(points)
-    n_stray = int(stray.sum())
-    fitted = points
-    if n_stray:  # stray returns would set the frame and pull the surface: leave them out
-        warnings.warn(describe_isolated(points, stray, named), OutlierWarning, stacklevel=2)
-        fitted = points[~stray]
-        if len(fitted) < MIN_POINTS:
-            raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points that are not "
-                            f"isolated, got {len(fitted)}")
-    try:
-        hf = to_height_field(fitted, view_axis=view_axis)  # type: ignore[arg-type]
-    except ScanError as exc:
-        if not named or str(exc).startswith(named):
-            raise
-        raise ScanError(f"{named}{exc}") from None  # name the file, like load_scan
-    t0 = time.perf_counter()
-    polish = polish_kind(hf.fold, cfg.polish)
-    learned, pr, (a0, centers, widths, weights), polish_seconds = learn_polished(
-        hf, cfg, polish, seed=seed, progress=progress, order=order)
-    net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)
-    res = residuals(net, hf)
-    abs_mm = np.abs(res) * hf.frame.scale[2]
-    fit_seconds = time.perf_counter() - t0
-    info = fit_info(hf.n_points, net, source, source_hash(points), int(seed), hf.spacing,
-                    learned, pr, float(np.mean(np.abs(res))), float(abs_mm.mean()),
-                    float(abs_mm.std()), polish_seconds, fit_seconds,
-                    outliers=n_stray or None)
-    return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info.to_dict())

@@ -33,9 +33,10 @@ import numpy as np
 
 from . import _config
 from ._config import FitConfig
+from ._fit import fit
 from ._frame import Frame, to_height_field
 from ._io import Scan
-from ._learn import auto_d_min, fit
+from ._learn import auto_d_min
 from ._mesh import Mesh
 from ._network import Network
 from ._outliers import isolated_points
@@ -239,7 +240,8 @@ def _check_coarsest(levels: int, span: np.ndarray, spacings: Any) -> None:
 
 def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resample",
             net: Network | None = None, seed: int = 0, d_mins: list[float] | None = None,
-            footprint: bool = True, base_resolution: int | None = None) -> list[LodLevel]:
+            footprint: bool = True, base_resolution: int | None = None,
+            pieces: str | int = "auto") -> list[LodLevel]:
     """Build a set of levels of detail of a range scan.
 
     Parameters
@@ -275,6 +277,10 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         Samples along the longer side of the level-0 grid, instead of the default
         spacing above; coarser levels scale it by ``2**i`` (``resample``) or by
         ``D_min_i / D_min_0`` (``refit``).
+    pieces : "auto" or 1
+        The fits made here: one network per smooth piece (``"auto"``), each level's mesh
+        made piece by piece and stitched (:func:`~asrbf_mesh.reconstruct`), or the
+        paper's single network (see :func:`~asrbf_mesh.fit`).
 
     Returns
     -------
@@ -351,7 +357,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
             s0 = float(spacing) * gmean
         _check_coarsest(levels, frame.scale[:2], lambda i: s0 * 2.0 ** min(i, 200))
         if net is None:
-            net = fit(sc, seed=seed, progress=False)
+            net = fit(sc, seed=seed, pieces=pieces, progress=False)
         nbytes = network_file_bytes(net)
         out = []
         for i in range(levels):
@@ -392,7 +398,8 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     out = []
     for i, (d, s) in enumerate(zip(dm, spacings, strict=True)):
         t = time.perf_counter()
-        ni = fit(sc, base_cfg.replace(d_min=d), seed=seed, view_axis=view_axis, progress=False)
+        ni = fit(sc, base_cfg.replace(d_min=d), seed=seed, view_axis=view_axis,
+                 pieces=pieces, progress=False)
         mesh = reconstruct(ni, spacing_abs=s, **fp_kw)
         seconds = time.perf_counter() - t
         out.append(LodLevel(i, "refit", mesh, network_file_bytes(ni), d, ni.n_neurons,

@@ -72,6 +72,8 @@ class FitInfo:
     outliers : int or None
         Isolated points left out of the frame and the fit (``n_points`` counts the others);
         None (and absent from ``info``) when there were none.
+    n_pieces : int
+        Pieces of the model (1: a single network; a streamed fit is always one piece).
     """
 
     n_points: int
@@ -96,6 +98,7 @@ class FitInfo:
     mix: int | None = None
     spacing_exact: bool | None = None
     outliers: int | None = None
+    n_pieces: int = 1
 
     _STREAM = ("streamed", "chunk", "mix", "spacing_exact")
 

@@ -19,7 +19,7 @@ from ._network import Network
 from ._validate import check_choice, check_float, check_int, check_points
 from .errors import ConfigError, ScanError
 
-__all__ = ["reconstruct", "grid_faces", "FOOTPRINT_MODES"]
+__all__ = ["reconstruct", "grid_faces", "piece_grid_mesh", "FOOTPRINT_MODES"]
 
 FOOTPRINT_MODES = _config.FOOTPRINT_MODES
 
@@ -142,13 +142,79 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         mid_y = 0.5 * (gy[:-1] + gy[1:])
         centres = np.stack(np.meshgrid(mid_x, mid_y), -1).reshape(-1, 2)
         keep = fp.inside(centres).reshape(ny - 1, nx - 1)
-    faces = grid_faces(nx, ny, keep)
-    used = np.unique(faces)
-    if used.size == 0:
+    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep)
+    return mesh
+
+
+def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.ndarray | None,
+                    *, walls: bool = True) -> tuple[Mesh, np.ndarray, np.ndarray]:
+    """Mesh each piece of ``net`` on the grid cells it owns, stitched by walls.
+
+    ``xy`` holds the ``nx`` x ``ny`` grid nodes (row-major, local physical units) and
+    ``keep`` ((ny-1, nx-1) bool, None for all) the cells to mesh. Each cell belongs to the
+    piece owning its centre (:meth:`~asrbf_mesh.Network.piece_at`); a node shared by cells
+    of two pieces gets one vertex per piece, each on its own piece's surface. With
+    ``walls``, the grid edge between two cells of different pieces becomes a wall of two
+    triangles between the two pieces' vertices of its end nodes: no ramp across a depth
+    jump, and no crack either. A one-piece network gives the plain grid mesh.
+
+    Returns
+    -------
+    mesh : Mesh
+        World units, normals from each vertex's piece.
+    vertex_xy : (V, 2) float64 array
+        The grid node of each vertex.
+    vertex_piece : (V,) int64 array
+        The piece each vertex lies on.
+
+    Raises
+    ------
+    ScanError
+        No cell is kept.
+    """
+    keep = np.ones((ny - 1, nx - 1), bool) if keep is None else keep
+    n_nodes = nx * ny
+    if net.n_pieces == 1:
+        owner = np.zeros(keep.shape, dtype=np.int64)
+    else:
+        centres = 0.5 * (xy.reshape(ny, nx, 2)[:-1, :-1] + xy.reshape(ny, nx, 2)[1:, 1:])
+        owner = net.piece_at(centres.reshape(-1, 2)).reshape(keep.shape)
+    parts = [grid_faces(nx, ny, keep & (owner == p)) + int(p) * n_nodes  # key: piece, node
+             for p in np.unique(owner[keep])]
+    if walls and net.n_pieces > 1:
+        parts.append(_wall_keys(nx, ny, keep, owner, n_nodes))
+    keys = np.concatenate(parts) if parts else np.zeros((0, 3), np.int64)
+    if keys.size == 0:
         raise ScanError("the footprint selects no grid cell (is the footprint the right scan?)")
-    remap = np.full(nx * ny, -1, dtype=np.int64)
-    remap[used] = np.arange(used.size)
-    xy = xy[used]
-    verts = net.surface_points(xy)
-    normals = net.normals(xy)
-    return Mesh(verts, remap[faces], vertex_normals=normals)
+    uniq, inverse = np.unique(keys.ravel(), return_inverse=True)
+    node, piece = uniq % n_nodes, uniq // n_nodes
+    pts = xy[node]
+    which = None if net.n_pieces == 1 else piece
+    mesh = Mesh(net.surface_points(pts, piece=which), inverse.reshape(-1, 3),
+                vertex_normals=net.normals(pts, piece=which))
+    return mesh, pts, piece
+
+
+def _wall_keys(nx: int, ny: int, keep: np.ndarray, owner: np.ndarray,
+               n_nodes: int) -> np.ndarray:
+    """Wall triangles (vertex keys) along grid edges between kept cells of two pieces.
+
+    For the cell A below (or left of) the edge, the edge runs a -> b in A's
+    counter-clockwise triangles; the wall ``(bA, aA, aB), (bA, aB, bB)`` runs it b -> a,
+    and B's side a -> b, opposite to B's own triangles: the mesh stays consistently
+    oriented.
+    """
+    out = []
+    # horizontal edges: cell (j, i) below, (j + 1, i) above; a = (j+1, i+1), b = (j+1, i)
+    j, i = np.nonzero(keep[:-1] & keep[1:] & (owner[:-1] != owner[1:]))
+    out.append(((j + 1) * nx + i + 1, (j + 1) * nx + i, owner[j, i], owner[j + 1, i]))
+    # vertical edges: cell (j, i) left, (j, i + 1) right; a = (j, i+1), b = (j+1, i+1)
+    j, i = np.nonzero(keep[:, :-1] & keep[:, 1:] & (owner[:, :-1] != owner[:, 1:]))
+    out.append((j * nx + i + 1, (j + 1) * nx + i + 1, owner[j, i], owner[j, i + 1]))
+    tris = [np.zeros((0, 3), np.int64)]
+    for a, b, pa, pb in out:
+        a_a, b_a = a + pa * n_nodes, b + pa * n_nodes
+        a_b, b_b = a + pb * n_nodes, b + pb * n_nodes
+        tris.append(np.column_stack([b_a, a_a, a_b]))
+        tris.append(np.column_stack([b_a, a_b, b_b]))
+    return np.concatenate(tris).astype(np.int64)

@@ -25,6 +25,7 @@ from ._config import (
     BLENDS,
     DECAYS,
     FOOTPRINT_MODES,
+    PIECES,
     POLISHES,
     PRUNINGS,
     UPDATES,
@@ -88,11 +89,32 @@ def _add_learning(p: argparse.ArgumentParser, full: bool = True) -> None:
                    help="depth direction of the height field [default: z]")
 
 
+def _add_pieces(p: argparse.ArgumentParser, what: str = "") -> None:
+    p.add_argument("--pieces", choices=PIECES, default="auto",
+                   help="auto: cut the scan at occlusion cliffs and walls and fit one network "
+                        "per smooth piece; 1: the paper's single network over the whole scan"
+                        f"{what} [default: auto]")
+
+
 def _f(value: Any, spec: str) -> str:
     """``value`` formatted, or ``n/a`` for a figure that does not exist (None, NaN)."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "n/a"
     return format(value, spec)
+
+
+def _pieces_line(s: dict[str, Any]) -> str:
+    """``3 (29,000 / 1,200 / 40 points)``, or the reason a streamed fit is one network."""
+    pieces = s.get("pieces")
+    if isinstance(pieces, str):
+        return f"1 ({pieces})"
+    if not pieces:
+        return "1"
+    sizes = " / ".join(f"{p['n_points']:,}" for p in pieces[:6])
+    more = f" / ... {len(pieces) - 6} more" if len(pieces) > 6 else ""
+    small = sum(p["constant"] for p in pieces)
+    consts = f", {small} constant" if small else ""
+    return f"{len(pieces)} ({sizes}{more} points{consts})"
 
 
 def _print_summary(s: dict[str, Any], out=None) -> None:
@@ -102,6 +124,7 @@ def _print_summary(s: dict[str, Any], out=None) -> None:
         ("neurons K", f"{s['n_neurons']:,}  (added {s['added']:,}, pruned {s['pruned']:,})"),
         ("E-bar (unit cube)", f"{_f(s['ebar'], '.5f')}  (sequential "
                               f"{_f(s['ebar_sequential'], '.5f')}, polish {s['polish']})"),
+        ("pieces", _pieces_line(s)),
         ("N:K", f"{s['n_to_k']:.1f}:1"),
         ("3N:4K", f"{s['storage_ratio']:.1f}:1"),
         ("error (scan units)", f"mean {_f(s['error_mean'], '.4g')}, "
@@ -126,6 +149,7 @@ def _show_info(d: dict[str, Any], args: argparse.Namespace) -> None:
     info, st, c = d["info"], d["stats"], d["config"]
     print(f"{args.network}: ASRBF network, format version {d['format_version']}")
     print(f"  neurons K          {d['n_neurons']:,}")
+    print(f"  pieces             {_pieces_line(d)}")
     if "n_points" in info:
         n, k = int(info["n_points"]), max(d["n_neurons"], 1)
         print(f"  fitted on N        {info['n_points']:,} points  (N:K {n / k:.1f}:1, "
@@ -322,6 +346,7 @@ def _fit_options(f: argparse.ArgumentParser, full: bool = True) -> None:
                    help="--stream: points per block, a multiple of 8192 [default: 65536]")
     f.add_argument("--mix", type=int, default=None,
                    help="--stream: blocks learned together in a random order [default: 16]")
+    _add_pieces(f, " (a --stream fit is always one network)")
     _add_learning(f, full)
 
 
@@ -339,6 +364,7 @@ def _fill_holes_options(h: argparse.ArgumentParser, full: bool = True) -> None:
     h.add_argument("--lowpass-rel", type=float, default=1.0,
                    help="over a hole use only neurons at least this many times as wide as "
                         "the hole; 0 keeps every neuron [default: 1]")
+    _add_pieces(h, " (for the fit made here)")
     if full:
         h.add_argument("--seed", type=int, default=0, help="seed of the fit [default: 0]")
         h.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -357,6 +383,7 @@ def _lod_options(lo: argparse.ArgumentParser, full: bool = True) -> None:
                          "simplification and pymeshlab quadric edge collapse)")
     lo.add_argument("--no-metro", dest="metro", action="store_false",
                     help="skip the Metro error measures")
+    _add_pieces(lo)
     if full:
         lo.add_argument("--seed", type=int, default=0)
         lo.add_argument("--json", action="store_true", help="print the manifest on stdout")
@@ -375,6 +402,7 @@ def _compare_options(c: argparse.ArgumentParser, full: bool = True) -> None:
                    help="do not write the two meshes")
     c.add_argument("--som-iterations", type=int, metavar="N",
                    help="SOM training steps (default 500 per node; fewer run faster)")
+    _add_pieces(c, " (for the fit made here)")
     if full:
         c.add_argument("--seed", type=int, default=0)
         c.add_argument("--json", action="store_true", help="print the results as JSON")

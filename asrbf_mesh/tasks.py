@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from ._atomic import atomic_dir, atomic_path, check_output_dir, check_output_path
-from ._config import FitConfig
+from ._config import PIECES, FitConfig
 from ._frame import VIEW_AXES
 from ._holes import BLENDS
 from ._io import load_scan, save_mesh
@@ -58,6 +58,7 @@ def _progress(value: Any) -> bool | None:
 def _fit_summary(net: Network) -> dict[str, Any]:
     info = net.info
     n = int(info["n_points"])
+    counters = net.log_counters()
     return {
         "n_points": n,
         "n_neurons": net.n_neurons,
@@ -75,13 +76,26 @@ def _fit_summary(net: Network) -> dict[str, Any]:
         "d_min": info["d_min"],
         "seed": info["seed"],
         "polish": net.config.polish,
-        "added": net.log.added if net.log else None,
-        "pruned": net.log.pruned if net.log else None,
+        "added": counters["added"] if counters else None,
+        "pruned": counters["pruned"] if counters else None,
+        "n_pieces": net.n_pieces,
+        "pieces": _pieces_summary(net),
     }
 
 
+def _pieces_summary(net: Network) -> list[dict[str, Any]] | str:
+    """Each piece's points, neurons and E-bar; or why a streamed fit is one piece."""
+    if net.info.get("streamed"):
+        return ("one network: a streamed fit is not segmented (cutting a scan into pieces "
+                "needs all of its points at once)")
+    return [{"n_points": p.info.get("n_points"), "n_neurons": p.n_neurons,
+             "ebar": p.info.get("ebar", net.info.get("ebar") if net.n_pieces == 1 else None),
+             "constant": bool(p.info.get("constant", False))} for p in net.pieces]
+
+
 def _check_fit(*, seed: int, view_axis: str, float32: bool, stream: bool, chunk: int | None,
-               mix: int | None, progress: bool | None, learning: dict[str, Any]) -> FitConfig:
+               mix: int | None, progress: bool | None, pieces: Any,
+               learning: dict[str, Any]) -> FitConfig:
     unknown = sorted(set(learning) - set(_LEARNING_FIELDS))
     if unknown:
         raise ConfigError(f"{unknown[0]} is not a learning option (one of "
@@ -91,6 +105,7 @@ def _check_fit(*, seed: int, view_axis: str, float32: bool, stream: bool, chunk:
     check_choice(view_axis, "view_axis", VIEW_AXES)
     check_bool(float32, "float32")
     check_bool(stream, "stream")
+    check_choice(pieces, "pieces", PIECES)
     _progress(progress)
     for name, value in (("chunk", chunk), ("mix", mix)):
         if value is None:
@@ -105,15 +120,18 @@ def _check_fit(*, seed: int, view_axis: str, float32: bool, stream: bool, chunk:
 def fit(scan: str | os.PathLike, output: str | os.PathLike, *, seed: int = 0,
         view_axis: str = "z", float32: bool = False, stream: bool = False,
         chunk: int | None = None, mix: int | None = None, progress: bool | None = None,
-        **learning: Any) -> dict[str, Any]:
+        pieces: str = "auto", **learning: Any) -> dict[str, Any]:
     """``asrbf fit``: fit a network to a scan file and save it (``.asrbf``).
 
     ``learning``: :class:`~asrbf_mesh.FitConfig` fields (``error_threshold``, ``d_min``,
     ``passes``, ``update`` ...); None keeps the default. ``chunk`` (65,536 points) and
-    ``mix`` (16 blocks) apply with ``stream=True`` only.
+    ``mix`` (16 blocks) apply with ``stream=True`` only. ``pieces``: ``"auto"`` (one
+    network per smooth piece) or ``"1"`` (one network); a streamed fit is one network
+    and says so in the summary's ``pieces``.
     """
     cfg = _check_fit(seed=seed, view_axis=view_axis, float32=float32, stream=stream,
-                     chunk=chunk, mix=mix, progress=progress, learning=learning)
+                     chunk=chunk, mix=mix, progress=progress, pieces=pieces,
+                     learning=learning)
     out = Path(output)
     if out.suffix.lower() != ".asrbf":
         raise AsrbfError(f"{out}: a network file must end in .asrbf")
@@ -130,9 +148,10 @@ def fit(scan: str | os.PathLike, output: str | os.PathLike, *, seed: int = 0,
         net = fit_stream(scan, cfg, seed=seed, view_axis=view_axis, chunk=chunk, mix=mix,
                          progress=progress)
     else:
-        from ._learn import fit as fit_scan
+        from ._fit import fit as fit_scan
 
-        net = fit_scan(data, cfg, seed=seed, view_axis=view_axis, progress=progress)
+        net = fit_scan(data, cfg, seed=seed, view_axis=view_axis, pieces=pieces,
+                       progress=progress)
     net.save(out, float32=float32, inputs=(scan,))
     return jsonable(_fit_summary(net) | {"output": str(out)})
 
@@ -144,9 +163,10 @@ def info(network: str | os.PathLike) -> dict[str, Any]:
     """``asrbf info``: describe a network file."""
     net = Network.load(network)
     return jsonable({"n_neurons": net.n_neurons, "format_version": FORMAT_VERSION,
+                     "n_pieces": net.n_pieces, "pieces": _pieces_summary(net),
                      "config": net.config.to_dict(), "frame": net.frame.to_dict(),
                      "stats": net.stats().to_dict(), "info": net.info,
-                     "log": net.log.counters() if net.log else None})
+                     "log": net.log_counters()})
 
 
 # --------------------------------------------------------------------------- reconstruct
@@ -193,7 +213,8 @@ def reconstruct(network: str | os.PathLike, output: str | os.PathLike, *,
 
 
 def _check_fill_holes(*, network: Any, max_hole_size: Any, blend: str, lowpass_rel: float,
-                      seed: int, progress: bool | None) -> None:
+                      seed: int, progress: bool | None, pieces: Any = "auto") -> None:
+    check_choice(pieces, "pieces", PIECES)
     check_choice(blend, "blend", BLENDS)
     check_float(lowpass_rel, "lowpass_rel")
     check_seed(seed)
@@ -203,21 +224,22 @@ def _check_fill_holes(*, network: Any, max_hole_size: Any, blend: str, lowpass_r
 def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
                network: str | os.PathLike | None = None, max_hole_size: str | float | None = None,
                blend: str = "thin-plate", lowpass_rel: float = 1.0, seed: int = 0,
-               progress: bool | None = None) -> dict[str, Any]:
+               progress: bool | None = None, pieces: str = "auto") -> dict[str, Any]:
     """``asrbf fill-holes``: fill a scan's holes from its network (fitted if not given).
 
-    ``lowpass_rel=0`` keeps every neuron over a hole.
+    ``lowpass_rel=0`` keeps every neuron over a hole; ``pieces`` as for :func:`fit` (the
+    fit made here: a given network keeps its own pieces).
     """
     from ._holes import fill_holes as fill
 
     _check_fill_holes(network=network, max_hole_size=max_hole_size, blend=blend,
-                      lowpass_rel=lowpass_rel, seed=seed, progress=progress)
+                      lowpass_rel=lowpass_rel, seed=seed, progress=progress, pieces=pieces)
     data = load_scan(scan)
     out = check_output_path(output, scan, network)
     net = Network.load(network) if network else None
     res = fill(data, net, max_hole_size=max_hole_size, blend=blend,
                lowpass_rel=None if lowpass_rel <= 0 else lowpass_rel, seed=seed,
-               progress=progress)
+               progress=progress, pieces=pieces)
     save_mesh(res.mesh, out, overwrite_inputs=(scan, network))
     return jsonable(res.to_dict() | {"output": str(out)})
 
@@ -226,7 +248,8 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
 
 
 def _check_lod(*, levels: int, method: str, compare_qem: bool, metro: bool,
-               seed: int) -> None:
+               seed: int, pieces: Any = "auto") -> None:
+    check_choice(pieces, "pieces", PIECES)
     check_int(levels, "levels", 1, MAX_LEVELS)
     check_choice(method, "method", LOD_METHODS)
     check_bool(compare_qem, "compare_qem")
@@ -236,7 +259,7 @@ def _check_lod(*, levels: int, method: str, compare_qem: bool, metro: bool,
 
 def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
         method: str = "resample", compare_qem: bool = False, metro: bool = True,
-        seed: int = 0) -> dict[str, Any]:
+        seed: int = 0, pieces: str = "auto") -> dict[str, Any]:
     """``asrbf lod``: write a level-of-detail set and its manifest into the folder ``output``.
 
     Returns the manifest. ``metro=False`` skips the Metro error measures.
@@ -244,11 +267,12 @@ def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
     from ._lod import lod_set
     from .evaluate import write_lod_set
 
-    _check_lod(levels=levels, method=method, compare_qem=compare_qem, metro=metro, seed=seed)
+    _check_lod(levels=levels, method=method, compare_qem=compare_qem, metro=metro, seed=seed,
+               pieces=pieces)
     data = load_scan(scan)
     out = check_output_dir(output)
     with atomic_dir(out, LOD_FILES) as tmp:
-        lods = lod_set(data, levels=levels, method=method, seed=seed)
+        lods = lod_set(data, levels=levels, method=method, seed=seed, pieces=pieces)
         manifest = write_lod_set(data, lods, tmp, compare_qem=compare_qem, metro=metro)
     return jsonable(manifest)
 
@@ -297,7 +321,9 @@ def metro(mesh: str | os.PathLike, reference: str | os.PathLike, *, samples: int
 
 
 def _check_compare(*, network: Any, holes: bool, lod: bool, meshes: bool,
-                   som_iterations: int | None, seed: int, progress: bool | None) -> None:
+                   som_iterations: int | None, seed: int, progress: bool | None,
+                   pieces: Any = "auto") -> None:
+    check_choice(pieces, "pieces", PIECES)
     for name, value in (("holes", holes), ("lod", lod), ("meshes", meshes)):
         check_bool(value, name)
     if som_iterations is not None:
@@ -309,19 +335,19 @@ def _check_compare(*, network: Any, holes: bool, lod: bool, meshes: bool,
 def compare(scan: str | os.PathLike, output: str | os.PathLike, *,
             network: str | os.PathLike | None = None, holes: bool = False, lod: bool = False,
             meshes: bool = True, som_iterations: int | None = None, seed: int = 0,
-            progress: bool | None = None) -> dict[str, Any]:
+            progress: bool | None = None, pieces: str = "auto") -> dict[str, Any]:
     """``asrbf compare``: our reconstruction vs the SOM baseline, report in folder ``output``."""
     from .evaluate._report import compare as run_compare
     from .evaluate._report import write_compare
 
     _check_compare(network=network, holes=holes, lod=lod, meshes=meshes,
-                   som_iterations=som_iterations, seed=seed, progress=progress)
+                   som_iterations=som_iterations, seed=seed, progress=progress, pieces=pieces)
     data = load_scan(scan)
     out = check_output_dir(output)
     net = Network.load(network) if network else None
     with atomic_dir(out, COMPARE_FILES) as tmp:
         c = run_compare(data, net=net, seed=seed, holes=holes, lod=lod, lod_dir=tmp / "lod",
-                        som_iterations=som_iterations, progress=progress)
+                        som_iterations=som_iterations, progress=progress, pieces=pieces)
         paths = write_compare(c, tmp, meshes=meshes)
     files = {k: str(out / Path(v).relative_to(tmp)) for k, v in paths.items()}
     return jsonable(c.to_dict() | {"files": files})
@@ -390,8 +416,8 @@ def demo(output: str | os.PathLike = "asrbf-demo", *, seed: int = 0,
 
     Returns the fit summary and the written files with their sizes.
     """
+    from ._fit import fit as fit_scan
     from ._io import face_map_path
-    from ._learn import fit as fit_scan
     from ._surface import reconstruct as mesh_network
 
     check_seed(seed)

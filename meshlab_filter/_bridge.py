@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 import pymeshlab
 
+from asrbf_mesh._fit import fit
 from asrbf_mesh._io import Scan
-from asrbf_mesh._learn import fit
 from asrbf_mesh._mesh import Mesh
 from asrbf_mesh._network import Network
 from asrbf_mesh.evaluate._meshlab import _from_ml
@@ -174,8 +174,11 @@ class NetworkCache:
                 "maxsize": self.maxsize}
 
     def network(self, ms: pymeshlab.MeshSet, mesh_id: int, scan: Scan, *, seed: int,
-                view_axis: str) -> Network:
-        """Return the network of layer ``mesh_id`` (whose points are ``scan``), fitting once.
+                view_axis: str, pieces: str = "auto") -> Network:
+        """Return the model of layer ``mesh_id`` (whose points are ``scan``), fitting once.
+
+        The model is piecewise (``pieces="auto"``) or the single network (``"1"``); the
+        key holds the layer, its points' digest, the seed, the view axis and ``pieces``.
 
         Raises
         ------
@@ -184,13 +187,14 @@ class NetworkCache:
         """
         for key in [k for k, (ref, _) in self._entries.items() if ref() is None]:
             del self._entries[key]
-        key = (id(ms), int(mesh_id), points_digest(scan.points), int(seed), view_axis)
+        key = (id(ms), int(mesh_id), points_digest(scan.points), int(seed), view_axis,
+               str(pieces))
         entry = self._entries.get(key)
         if entry is not None and entry[0]() is ms:
             self._entries.move_to_end(key)
             self.hits += 1
             return entry[1]
-        net = fit(scan, seed=seed, view_axis=view_axis, progress=False)
+        net = fit(scan, seed=seed, view_axis=view_axis, pieces=pieces, progress=False)
         self.misses += 1
         self._entries[key] = (weakref.ref(ms), net)
         while len(self._entries) > self.maxsize:

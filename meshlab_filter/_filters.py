@@ -56,7 +56,8 @@ def _fitted(ms: pymeshlab.MeshSet, name: str, p: dict[str, Any]
     m = mesh_of(ms, None, name)
     mesh_id = int(ms.current_mesh_id())
     scan = layer_scan(m)
-    net = cache.network(ms, mesh_id, scan, seed=p["seed"], view_axis=p["viewaxis"])
+    net = cache.network(ms, mesh_id, scan, seed=p["seed"], view_axis=p["viewaxis"],
+                        pieces=p["pieces"])
     return m, mesh_id, scan, net
 
 
@@ -157,7 +158,7 @@ def _lod(ms: pymeshlab.MeshSet, p: dict[str, Any]) -> dict[str, Any]:
     if p["targetfacenum"]:
         base = _base_resolution(net, scan, p["targetfacenum"], p["footprint"])
     levels = lod_set(scan, levels=p["levels"], method=p["method"], net=net, seed=p["seed"],
-                     footprint=p["footprint"], base_resolution=base)
+                     footprint=p["footprint"], base_resolution=base, pieces=p["pieces"])
     label = _label(m, mesh_id)
     ids = [add_layer(ms, lv.mesh, f"{label} (asrbf LOD {lv.index})") for lv in levels]
     return {"mesh_ids": ids, "faces": [lv.mesh.n_faces for lv in levels],

@@ -270,6 +270,9 @@ _VIEW_AXES = ("z", "x", "y", "pca")
 
 _SEED = Param("seed", "int", 0, "Seed of the network fit (same seed, same network). The fit "
               "of a layer is cached: filters on one unchanged layer fit it once.", minimum=0)
+_PIECES = Param("pieces", "enum", "auto", "'auto': cut the scan at occlusion cliffs and "
+                "walls and fit one network per smooth piece; '1': the paper's single "
+                "network over the whole scan.", choices=("auto", "1"))
 _VIEWAXIS = Param("viewaxis", "enum", "z", "Depth axis of the range scan's height field: "
                   "'z', 'x', 'y', or 'pca' (the points' least-variance direction).",
                   choices=_VIEW_AXES)
@@ -293,6 +296,7 @@ FILTERS: dict[str, FilterSpec] = {spec.name: spec for spec in (
                   "fraction of its size on every side (the network's extrapolation).",
                   minimum=0.0),
             _SEED,
+            _PIECES,
             _VIEWAXIS,
         ),
     ),
@@ -312,6 +316,7 @@ FILTERS: dict[str, FilterSpec] = {spec.name: spec for spec in (
                   "selected face on their rim."),
             Param("newfaceselected", "bool", True, "Select the new faces in the new layer."),
             _SEED,
+            _PIECES,
             _VIEWAXIS,
         ),
     ),
@@ -333,6 +338,7 @@ FILTERS: dict[str, FilterSpec] = {spec.name: spec for spec in (
             Param("footprint", "bool", True, "Mesh only the scan's footprint (its triangles "
                   "and the holes they enclose); False: the whole bounding square."),
             _SEED,
+            _PIECES,
             _VIEWAXIS,
         ),
     ),
@@ -347,6 +353,7 @@ FILTERS: dict[str, FilterSpec] = {spec.name: spec for spec in (
             Param("signed", "bool", False, "Store the signed residual z - f instead of its "
                   "absolute value."),
             _SEED,
+            _PIECES,
             _VIEWAXIS,
         ),
     ),

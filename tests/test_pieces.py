@@ -1,15 +1,17 @@
-"""One network per smooth piece (private prototype, asrbf_mesh._pieces)."""
+"""Piecewise networks: one network per smooth piece, one model type (asrbf_mesh.Network)."""
 
 from __future__ import annotations
 
+import pickle
 import warnings
+import zipfile
 
 import numpy as np
 import pytest
 from _grids import grid_faces, height_grid
 
 import asrbf_mesh as am
-from asrbf_mesh._pieces import PieceFit, fit_pieces, piece_seed
+from asrbf_mesh._pieces import piece_seed
 
 NX, NY = 60, 30  # a range grid of unit spacing; the cliff runs along x = 30
 
@@ -29,79 +31,111 @@ def cliff_scan(fragment: bool = False) -> am.Scan:
 
 
 @pytest.fixture(scope="module")
-def fitted() -> tuple[am.Scan, PieceFit]:
+def fitted() -> tuple[am.Scan, am.Network]:
     scan = cliff_scan()
-    return scan, fit_pieces(scan, seed=0)
+    return scan, am.fit(scan, seed=0, progress=False)
 
 
 def test_pieces_fit_the_cliff_far_better_than_one_network(fitted) -> None:
-    scan, pf = fitted
-    assert pf.segmentation.n_pieces == 2 and len(pf.networks) == 2
-    single = am.fit(scan, seed=0, progress=False)
-    assert pf.ebar < 0.3 * single.info["ebar"]  # measured 0.0017 vs 0.0144
-    assert pf.n_neurons == sum(n.n_neurons for n in pf.networks) < single.n_neurons
-    assert pf.n_points == scan.n_points and pf.seconds > 0
+    scan, net = fitted
+    assert net.n_pieces == 2 and net.info["n_pieces"] == 2
+    single = am.fit(scan, seed=0, pieces=1, progress=False)
+    assert single.n_pieces == 1 and single.piece_map is None
+    assert net.info["ebar"] < 0.3 * single.info["ebar"]  # measured 0.0017 vs 0.0144
+    assert net.n_neurons == sum(p.n_neurons for p in net.pieces) < single.n_neurons
+    assert net.info["n_points"] == scan.n_points
+    assert net.compression_ratio() == scan.n_points / net.n_neurons
 
 
-def test_every_point_has_a_piece_and_the_reported_ebar(fitted) -> None:
-    scan, pf = fitted
-    labels = pf.segmentation.labels
-    np.testing.assert_array_equal(labels, (scan.points[:, 0] >= 29.5).astype(np.int64))
+def test_every_point_is_evaluated_by_its_piece(fitted) -> None:
+    scan, net = fitted
+    labels = (scan.points[:, 0] >= 29.5).astype(np.int64)
     hf = am.to_height_field(scan.points)
-    f = np.empty(len(labels))
-    for i, net in enumerate(pf.networks):
-        f[labels == i] = net.evaluate(hf.xy[labels == i], unit=True)
-    assert np.mean(np.abs(f - hf.z)) == pytest.approx(pf.ebar, rel=1e-12)
+    np.testing.assert_array_equal(net.piece_at(hf.xy, unit=True), labels)
+    f = net.evaluate(hf.xy, unit=True)
+    assert np.mean(np.abs(f - hf.z)) == pytest.approx(net.info["ebar"], rel=1e-12)
+    np.testing.assert_array_equal(f, net.evaluate(hf.xy, unit=True, piece=labels))
+    # a given piece evaluates there, whatever the map says
+    left = net.evaluate(hf.xy[labels == 1], unit=True, piece=0)
+    assert np.abs(left - hf.z[labels == 1]).mean() > 0.2
+    assert net.pieces[0].info["n_points"] + net.pieces[1].info["n_points"] == scan.n_points
 
 
-def test_the_networks_share_the_scans_frame(fitted) -> None:
-    scan, pf = fitted
-    frame = am.to_height_field(scan.points).frame
-    for net in pf.networks:
-        for name in ("rotation", "offset", "scale"):
-            np.testing.assert_array_equal(getattr(net.frame, name), getattr(frame, name))
-    assert pf.networks[0].frame is pf.networks[1].frame
+def test_the_joined_parameters_are_the_pieces(fitted) -> None:
+    _, net = fitted
+    np.testing.assert_array_equal(
+        net.widths, np.concatenate([p.widths for p in net.pieces]))
+    assert net.centers.shape == (net.n_neurons, 2) and not net.centers.flags.writeable
+    assert net.stats().n_neurons == net.n_neurons
+    with pytest.raises(am.ConfigError, match="one a0 per piece"):
+        _ = net.a0
+    assert net.log is None and net.log_counters()["added"] >= net.n_neurons
 
 
-def test_same_seed_same_networks(fitted) -> None:
-    scan, pf = fitted
-    again = fit_pieces(scan, seed=0)
-    other = fit_pieces(scan, seed=1)
-    for a, b in zip(pf.networks, again.networks, strict=True):
-        assert a.a0 == b.a0
-        for name in ("centers", "widths", "weights"):
-            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
-    assert pf.ebar == again.ebar
-    assert other.networks[0].info["seed"] != pf.networks[0].info["seed"]
-    assert pf.networks[0].info["seed"] == piece_seed(0, 0) != piece_seed(0, 1)
+def test_same_seed_same_bytes_and_a_file_round_trip(fitted, tmp_path) -> None:
+    scan, net = fitted
+    again = am.fit(scan, seed=0, progress=False)
+    a, b = net.save(tmp_path / "a.asrbf"), again.save(tmp_path / "b.asrbf")
+    assert a.read_bytes() == b.read_bytes()
+    back = am.Network.load(a)
+    assert back.n_pieces == 2 and back.piece_map is not None
+    hf = am.to_height_field(scan.points)
+    np.testing.assert_array_equal(back.evaluate(hf.xy), net.evaluate(hf.xy))
+    np.testing.assert_array_equal(back.pieces[1].log.rms, net.pieces[1].log.rms)
+    with zipfile.ZipFile(a) as zf:
+        assert {"a0.npy", "piece_neurons.npy", "piece_map.npy"} <= set(zf.namelist())
+    p = pickle.loads(pickle.dumps(net))
+    np.testing.assert_array_equal(p.evaluate(hf.xy), net.evaluate(hf.xy))
+    other = am.fit(scan, seed=1, progress=False)
+    assert other.pieces[0].info["seed"] != net.pieces[0].info["seed"]
+    assert net.pieces[0].info["seed"] == piece_seed(0, 0) != piece_seed(0, 1)
 
 
-def test_a_tiny_fragment_gets_a_constant_network() -> None:
+def test_a_one_piece_scan_is_exactly_the_single_network(tmp_path) -> None:
+    pts, faces = height_grid(lambda x, y: np.sin(x / 9.0) * np.cos(y / 7.0), 40, 30)
+    scan = am.Scan(pts, faces)
+    auto = am.fit(scan, seed=3, progress=False)
+    single = am.fit(scan, seed=3, pieces="1", progress=False)
+    assert auto.n_pieces == 1
+    assert (auto.save(tmp_path / "a.asrbf").read_bytes()
+            == single.save(tmp_path / "b.asrbf").read_bytes())
+
+
+def test_a_tiny_fragment_gets_a_constant_piece() -> None:
     scan = cliff_scan(fragment=True)
-    pf = fit_pieces(scan, seed=0)
-    seg = pf.segmentation
-    assert seg.n_pieces == 3 and seg.small.tolist() == [False, False, True]
-    frag = pf.networks[2]
+    net = am.fit(scan, seed=0, progress=False)
+    assert net.n_pieces == 3
+    frag = net.pieces[2]
     hf = am.to_height_field(scan.points)
     assert frag.n_neurons == 0 and frag.a0 == pytest.approx(hf.z[-10:].mean())
-    assert pf.n_neurons == pf.networks[0].n_neurons + pf.networks[1].n_neurons
-    assert pf.n_points == NX * NY + 10
+    assert frag.info["constant"] is True
+    assert net.n_neurons == net.pieces[0].n_neurons + net.pieces[1].n_neurons
+    assert net.info["n_points"] == NX * NY + 10
 
 
 def test_a_given_segmentation_is_used() -> None:
     scan = cliff_scan()
     seg = am.segment(scan, min_piece_points=2000)  # both pieces small: two constants
-    pf = fit_pieces(scan, segmentation=seg)
-    assert pf.segmentation is seg and pf.n_neurons == 0
+    net = am.fit(scan, pieces=seg, progress=False)
+    assert net.n_pieces == 2 and net.n_neurons == 0
 
 
-@pytest.mark.parametrize("kw, name", [
-    ({"config": {"passes": 2}}, "config"), ({"seed": -1}, "seed"), ({"seed": 1.5}, "seed"),
-    ({"view_axis": "w"}, "view_axis"), ({"segmentation": "pieces"}, "segmentation"),
-    ({"progress": "yes"}, "progress")])
-def test_bad_arguments_raise_config_error(kw: dict, name: str) -> None:
-    with pytest.raises(am.ConfigError, match=f"^{name}"):
-        fit_pieces(cliff_scan(), **kw)
+def test_outliers_are_left_out_of_the_pieces() -> None:
+    scan = cliff_scan()
+    pts = np.vstack([scan.points, [[10.0, 10.0, 1e6]]])
+    with pytest.warns(am.OutlierWarning):
+        net = am.fit(am.Scan(pts, scan.faces), seed=0, progress=False)
+    clean = am.fit(scan, seed=0, progress=False)
+    assert net.info["outliers"] == 1 and net.n_pieces == 2
+    assert net.info["ebar"] == pytest.approx(clean.info["ebar"], rel=1e-9)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"pieces": 2}, "^pieces must be one of"), ({"pieces": "many"}, "^pieces must be one of"),
+    ({"order": lambda rng: rng.permutation(NX * NY)}, "order applies to a single network")])
+def test_bad_arguments_raise_config_error(kw: dict, match: str) -> None:
+    with pytest.raises(am.ConfigError, match=match):
+        am.fit(cliff_scan(), progress=False, **kw)
 
 
 def test_a_segmentation_of_another_scan_or_axis_is_refused() -> None:
@@ -111,6 +145,36 @@ def test_a_segmentation_of_another_scan_or_axis_is_refused() -> None:
         other = am.segment(cliff_scan(fragment=True))
         along_x = am.segment(scan, view_axis="x")
     with pytest.raises(am.ConfigError, match="segmentation has 1,810 points"):
-        fit_pieces(scan, segmentation=other)
-    with pytest.raises(am.ConfigError, match="view_axis 'x'"):
-        fit_pieces(scan, segmentation=along_x)
+        am.fit(scan, pieces=other)
+    with pytest.raises(am.ConfigError, match="view axis 'x'"):
+        am.fit(scan, pieces=along_x)
+
+
+def test_a_piecewise_model_needs_a_map_naming_its_pieces(fitted) -> None:
+    _, net = fitted
+    with pytest.raises(am.ConfigError, match="needs a PieceMap"):
+        am.Network.from_pieces(net.pieces, net.frame, net.config)
+    with pytest.raises(am.ConfigError, match="non-empty sequence of Piece"):
+        am.Network.from_pieces([], net.frame, net.config)
+    with pytest.raises(am.ConfigError, match="piece must be in"):
+        net.evaluate(np.zeros((2, 2)), piece=np.array([0, 2]))
+
+
+def test_reconstruct_meshes_each_piece_and_walls_between_them(fitted) -> None:
+    scan, net = fitted
+    mesh = am.reconstruct(net, footprint=scan)
+    single = am.fit(scan, seed=0, pieces=1, progress=False)
+    ramp = am.reconstruct(single, footprint=scan)
+    # no vertex halfway up the cliff: every vertex is on one of the two levels
+    def off_levels(m: am.Mesh) -> int:
+        z = m.vertices[:, 2] - 2.0 * np.sin(m.vertices[:, 0] / 9.0) * np.cos(
+            m.vertices[:, 1] / 7.0)
+        return int(np.sum(np.minimum(np.abs(z), np.abs(z - 10.0)) > 1.0))
+    assert off_levels(mesh) == 0 < off_levels(ramp)
+    # the wall closes the seam: every edge is shared by two faces but the outer border's
+    def edge_use(m: am.Mesh) -> np.ndarray:
+        edges = np.sort(m.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        return np.unique(edges, axis=0, return_counts=True)[1]
+    assert edge_use(mesh).max() == 2
+    # the same outer border as the single network's mesh, plus the wall's two ends
+    assert np.sum(edge_use(mesh) == 1) == np.sum(edge_use(ramp) == 1) + 2

@@ -63,7 +63,8 @@ def _metro_dict(r: Any) -> dict[str, Any]:
 
 def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, seed: int = 0,
             holes: bool = False, lod: bool = False, lod_dir: str | os.PathLike | None = None,
-            som_iterations: int | None = None, progress: bool | None = None) -> Comparison:
+            som_iterations: int | None = None, progress: bool | None = None,
+            pieces: str | int = "auto") -> Comparison:
     """Compare our reconstruction of ``scan`` with the SOM baseline, and more on request.
 
     Parameters
@@ -86,6 +87,8 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
         node; fewer steps give a faster, coarser baseline).
     progress : bool, optional
         A progress bar over the steps (default: on a terminal).
+    pieces : "auto" or 1
+        The fit made when ``net`` is omitted (see :func:`~asrbf_mesh.fit`).
 
     Returns
     -------
@@ -96,7 +99,7 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
     AsrbfError
         A scan without faces, or a failure of one of the steps.
     """
-    from .._learn import fit
+    from .._fit import fit
     from ._som import compare_som
 
     if scan.faces is None or len(scan.faces) == 0:
@@ -115,7 +118,7 @@ def compare(scan: Scan, *, name: str | None = None, net: Network | None = None, 
     try:
         t0 = time.perf_counter()
         if net is None:
-            net = fit(scan, seed=seed, progress=False)
+            net = fit(scan, seed=seed, pieces=pieces, progress=False)
         times["fit"] = time.perf_counter() - t0
         if tick:
             tick(1)

@@ -33,7 +33,7 @@ from .._frame import sampling_spacing
 from .._io import Scan
 from .._mesh import Mesh
 from .._network import Network
-from .._surface import grid_faces
+from .._surface import piece_grid_mesh
 from .._validate import check_int, check_points, check_seed
 from .._validate import progress as progress_bar
 from ..errors import AsrbfError, ConfigError, ScanError
@@ -383,16 +383,19 @@ def network_vertices(net: Network, n: int, footprint_scan: Scan | np.ndarray, *,
     centres = np.stack(np.meshgrid(0.5 * (gx[:-1] + gx[1:]), 0.5 * (gy[:-1] + gy[1:])),
                        axis=-1).reshape(-1, 2)
     keep = (fp.label_at(centres) == 0).reshape(ny - 1, nx - 1)
-    fine = grid_faces(int(nx), int(ny), keep)
-    if len(fine) == 0:
+    if not keep.any():
         raise AsrbfError("no grid cell lands on the footprint (is it the scan of this network?)")
-    used = np.unique(fine)
-    remap = np.full(int(nx * ny), -1, dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    grid = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)[used]
-    verts = net.surface_points(grid)
-    dense = _area_samples(verts, remap[fine], 10 * n, np.random.default_rng(seed), grid)
-    candidates = np.vstack([verts, net.surface_points(dense)]) if len(dense) else verts
+    grid = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)
+    # each piece on its own cells, no wall: samples stay on the pieces' surfaces
+    fine, node_xy, piece = piece_grid_mesh(net, grid, int(nx), int(ny), keep, walls=False)
+    verts = fine.vertices
+    dense = _area_samples(verts, fine.faces, 10 * n, np.random.default_rng(seed),
+                          np.column_stack([node_xy, piece]))
+    if len(dense):
+        which = None if net.n_pieces == 1 else np.rint(dense[:, 2]).astype(np.int64)
+        candidates = np.vstack([verts, net.surface_points(dense[:, :2], piece=which)])
+    else:
+        candidates = verts
     if len(candidates) < n:
         raise AsrbfError(f"the footprint holds fewer than n={n} distinct points")
     return candidates[_farthest_points(candidates, n)]
@@ -516,7 +519,7 @@ def compare_som(scan: Scan, net: Network | None = None, *, seed: int = 0,
         Bad arguments, a network with fewer than 4 neurons, or a ball-pivoting mesh
         without faces.
     """
-    from .._learn import fit
+    from .._fit import fit
 
     if not isinstance(scan, Scan):
         raise ScanError(f"scan must be an asrbf_mesh.Scan, got {type(scan).__name__}")

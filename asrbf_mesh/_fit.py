@@ -1,0 +1,193 @@
+"""Fitting a scan: outliers out, the scan cut into smooth pieces, one network per piece.
+
+:func:`fit` is the entry point of every command that learns: it leaves isolated points
+out (:mod:`asrbf_mesh._outliers`), builds the whole scan's frame, cuts the scan into
+pieces that are each a smooth height field (:func:`~asrbf_mesh.segment`, ``pieces="auto"``)
+and learns them (:mod:`asrbf_mesh._pieces`), or learns the paper's single network
+(``pieces=1``); either way it returns a :class:`~asrbf_mesh.Network`.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from . import _config
+from ._config import FitConfig
+from ._frame import HeightField, to_height_field
+from ._io import Scan
+from ._learn import MIN_POINTS, fit_info, learn_polished, polish_kind, residuals, source_hash
+from ._mesh import Mesh
+from ._network import FitInfo, Network
+from ._outliers import OutlierWarning, describe_isolated, isolated_points
+from ._pieces import learn_pieces
+from ._segment import Segmentation, segment
+from ._validate import check_choice, check_points, check_seed
+from ._version import __version__
+from .errors import ConfigError, ScanError
+
+__all__ = ["fit", "check_pieces"]
+
+
+def check_pieces(pieces: Any) -> str | Segmentation:
+    """Return ``"auto"``, ``"1"`` or the :class:`Segmentation` given; else ConfigError."""
+    if isinstance(pieces, Segmentation):
+        return pieces
+    if isinstance(pieces, int) and not isinstance(pieces, bool):
+        pieces = str(pieces)
+    return check_choice(pieces, "pieces", _config.PIECES)
+
+
+def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int = 0,
+        view_axis: str = "z", pieces: str | int | Segmentation = "auto",
+        progress: bool | None = None,
+        order: Callable[[np.random.Generator], np.ndarray] | None = None,
+        **overrides: Any) -> Network:
+    """Fit a range scan: one ASRBF network per smooth piece (learning, then the polish).
+
+    Parameters
+    ----------
+    scan : Scan or (N, 3) array
+        The scan points in world units (a Scan's triangles guide the segmentation).
+    config : FitConfig, optional
+        Learning parameters, the same for every piece; paper defaults (section 5.1)
+        with D_min from the data.
+    seed : int
+        Random replay order; the same seed gives the same network bit for bit. Piece
+        ``i`` of several learns with :func:`~asrbf_mesh._pieces.piece_seed` ``(seed, i)``.
+    view_axis : {"z", "x", "y", "pca"}
+        Depth direction of the height field.
+    pieces : "auto", 1 or Segmentation
+        ``"auto"``: cut the scan into smooth pieces (:func:`~asrbf_mesh.segment` with its
+        defaults) and learn one network per piece, all in the whole scan's frame with
+        the same thresholds; a scan of one piece gives exactly the single network.
+        ``1``: the paper's single network over the whole scan. A :class:`Segmentation`
+        of the scan's points: those pieces.
+    progress : bool, optional
+        Progress bar on stderr (default: on a terminal, for fits over a second).
+    order : callable, optional
+        The replay order of each pass, see :func:`~asrbf_mesh.learn` (default: a uniform
+        random permutation per pass); a single network only (``pieces=1``).
+    **overrides
+        FitConfig fields to change, e.g. ``passes=3``.
+
+    Returns
+    -------
+    Network
+        With ``info`` holding ``n_points``, ``n_pieces``, ``ebar`` (mean |f - z| in the
+        unit cube over all points, each by its own piece), ``error_mean`` /
+        ``error_std`` (|depth error| in scan units), ``steps``, timings and provenance
+        (typed: ``net.fit_info``, a :class:`FitInfo`). When most points fold over along
+        the view axis (a closed mesh: no height field), the polish is skipped with a
+        :class:`HeightFieldWarning` (see :func:`~asrbf_mesh._learn.polish_kind`).
+
+    Raises
+    ------
+    ConfigError
+        A bad argument (``pieces``, ``order`` with several pieces, ...).
+    ScanError
+        Unusable points (too few, NaN, zero x or y extent).
+    FitError
+        The GEKF updater would need more than 2,000 neurons.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.random((3000, 2))
+    >>> pts = np.c_[xy, np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])]
+    >>> net = fit(pts, seed=0, progress=False)
+    >>> bool(net.info["ebar"] < 0.01), net.n_pieces
+    (True, 1)
+    """
+    seed = check_seed(seed)
+    pieces = check_pieces(pieces)
+    cfg = (config or FitConfig()).replace(**overrides) if overrides else (config or FitConfig())
+    if isinstance(scan, Scan):
+        points, source, faces = scan.points, scan.source, scan.faces
+    else:
+        points, source, faces = check_points(scan, "points"), None, None
+    named = f"{source}: " if source else ""
+    if len(points) < MIN_POINTS:
+        raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points, got {len(points)}")
+    if isinstance(pieces, Segmentation) and pieces.n_points != len(points):
+        raise ConfigError(f"pieces: the segmentation has {pieces.n_points:,} points, the scan "
+                          f"{len(points):,}")
+    stray = isolated_points(points)
+    n_stray = int(stray.sum())
+    fitted = points
+    if n_stray:  # stray returns would set the frame and pull the surface: leave them out
+        warnings.warn(describe_isolated(points, stray, named), OutlierWarning, stacklevel=2)
+        fitted = points[~stray]
+        if len(fitted) < MIN_POINTS:
+            raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points that are not "
+                            f"isolated, got {len(fitted)}")
+    try:
+        hf = to_height_field(fitted, view_axis=view_axis)  # type: ignore[arg-type]
+    except ScanError as exc:
+        if not named or str(exc).startswith(named):
+            raise
+        raise ScanError(f"{named}{exc}") from None  # name the file, like load_scan
+    t0 = time.perf_counter()
+    seg = _segmentation(pieces, fitted, faces, stray, view_axis)
+    if seg is not None and order is not None:
+        raise ConfigError("order applies to a single network: pass pieces=1")
+    polish = polish_kind(hf.fold, cfg.polish)
+    common = (source, source_hash(points), int(seed), n_stray or None)
+    if seg is None or seg.n_pieces == 1:
+        return _fit_single(hf, cfg, polish, seed, progress, order, t0, *common)
+    return _fit_pieces(hf, seg, cfg, polish, seed, progress, t0, *common)
+
+
+def _segmentation(pieces: str | Segmentation, points: np.ndarray, faces: np.ndarray | None,
+                  stray: np.ndarray, view_axis: str) -> Segmentation | None:
+    """Return the pieces of the points kept (None for a single network)."""
+    if isinstance(pieces, Segmentation):
+        if stray.any():
+            raise ConfigError("pieces: a segmentation cannot be given for a scan with "
+                              "isolated points (they are left out of the fit)")
+        if pieces.view_axis != view_axis:
+            raise ConfigError(f"pieces: the segmentation was made along view axis "
+                              f"{pieces.view_axis!r}, not {view_axis!r}")
+        return pieces
+    if pieces == "1":
+        return None
+    if faces is not None and len(faces) and stray.any():  # drop the strays' triangles
+        new = np.cumsum(~stray) - 1
+        faces = new[faces[~stray[faces].any(axis=1)]]
+    mesh = Mesh(points, faces if faces is not None else np.zeros((0, 3), np.int64))
+    return segment(mesh, view_axis=view_axis)
+
+
+def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
+                progress: bool | None, order: Any, t0: float, source: str | None, sha: str,
+                seed_out: int, outliers: int | None) -> Network:
+    learned, pr, (a0, centers, widths, weights), polish_seconds = learn_polished(
+        hf, cfg, polish, seed=seed, progress=progress, order=order)
+    net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)
+    res = residuals(net, hf)
+    abs_mm = np.abs(res) * hf.frame.scale[2]
+    info = fit_info(hf.n_points, net, source, sha, seed_out, hf.spacing, learned, pr,
+                    float(np.mean(np.abs(res))), float(abs_mm.mean()), float(abs_mm.std()),
+                    polish_seconds, time.perf_counter() - t0, outliers=outliers)
+    return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info.to_dict())
+
+
+def _fit_pieces(hf: HeightField, seg: Segmentation, cfg: FitConfig, polish: str, seed: int,
+                progress: bool | None, t0: float, source: str | None, sha: str,
+                seed_out: int, outliers: int | None) -> Network:
+    got = learn_pieces(hf, seg, cfg, polish, seed=seed, progress=progress)
+    abs_mm = got.absres * hf.frame.scale[2]
+    k = sum(p.n_neurons for p in got.pieces)
+    info = FitInfo(
+        n_points=hf.n_points, n_neurons=k, source=source, source_sha256=sha, seed=seed_out,
+        spacing=hf.spacing, d_min=got.d_min, steps=got.steps, ebar=float(got.absres.mean()),
+        ebar_sequential=got.ebar_sequential, error_mean=float(abs_mm.mean()),
+        error_std=float(abs_mm.std()), learn_seconds=got.learn_seconds,
+        polish_seconds=got.polish_seconds, fit_seconds=time.perf_counter() - t0,
+        us_per_step=1e6 * got.learn_seconds / max(got.steps, 1), version=__version__,
+        outliers=outliers, n_pieces=len(got.pieces))
+    return Network.from_pieces(got.pieces, hf.frame, cfg, info.to_dict(), got.piece_map)
