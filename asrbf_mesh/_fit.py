@@ -137,9 +137,22 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
         raise ConfigError("order applies to a single network: pass pieces=1")
     polish = polish_kind(hf.fold, cfg.polish)
     common = (source, source_hash(points), int(seed), n_stray or None)
-    if seg is None or seg.n_pieces == 1:
+    if seg is None or seg.n_pieces == 1 or _scattered(seg):
         return _fit_single(hf, cfg, polish, seed, progress, order, t0, *common)
     return _fit_pieces(hf, seg, cfg, polish, seed, progress, t0, *common)
+
+
+#: Pieces that learn (not small) must hold at least this share of the points.
+MIN_LEARNED_SHARE = 0.5
+
+
+def _scattered(seg: Segmentation) -> bool:
+    """Whether the cut scattered the scan into small pieces (a sparse, uneven cloud).
+
+    Then most points would get a constant: one network over the whole scan fits better,
+    and :func:`fit` falls back to it.
+    """
+    return float(seg.sizes[~seg.small].sum()) < MIN_LEARNED_SHARE * seg.n_points
 
 
 def _segmentation(pieces: str | Segmentation, points: np.ndarray, faces: np.ndarray | None,

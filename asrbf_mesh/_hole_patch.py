@@ -23,6 +23,7 @@ from . import _holes_kernels as _hk
 from ._footprint import signed_areas
 from ._hole_find import Hole
 from ._network import Network
+from ._piece import Piece
 
 __all__ = ["BLENDS", "EMPTY", "Ctx", "Patch", "away_from", "close_patch", "fill_single",
            "grid_samples", "ring_reach", "triangulate"]
@@ -80,10 +81,13 @@ def _lowpass(net: Network, hole_size: float, factor: float | None) -> Network:
     """Drop the neurons narrower than ``factor`` x the hole size from the network."""
     if factor is None:
         return net
+    if np.isinf(factor):  # no substrate: one flat surface (pieces' constants would step)
+        return Network(0.0, np.zeros((0, 2)), np.zeros(0), np.zeros(0), net.frame, net.config,
+                       None, net.info)
     cut = factor * hole_size / float(np.sqrt(net.frame.scale[0] * net.frame.scale[1]))
-    keep = net.widths >= cut
-    return Network(net.a0, net.centers[keep], net.widths[keep], net.weights[keep], net.frame,
-                   net.config, None, net.info)
+    pieces = tuple(Piece(p.a0, p.centers[p.widths >= cut], p.widths[p.widths >= cut],
+                         p.weights[p.widths >= cut], None, p.info) for p in net.pieces)
+    return Network.from_pieces(pieces, net.frame, net.config, net.info, net.piece_map)
 
 
 EMPTY = (np.zeros((0, 3)), np.zeros((0, 3), np.int64))

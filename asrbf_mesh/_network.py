@@ -23,7 +23,7 @@ from ._network_file import FORMAT_NAME, FORMAT_VERSION, VOLATILE_INFO, read_netw
 from ._piece import FitLog, Piece, eval_grid, eval_unit
 from ._piece_map import PieceMap
 from ._validate import check_float, check_int, plural, readonly
-from .errors import ConfigError, ScanError
+from .errors import ConfigError, NetworkFileError, ScanError
 
 __all__ = ["Network", "Piece", "FitInfo", "FitLog", "NeuronStats", "FORMAT_NAME",
            "FORMAT_VERSION", "eval_grid", "eval_unit"]
@@ -505,7 +505,10 @@ class Network:
             Missing, unreadable, foreign, corrupt or version-mismatched file.
         """
         pieces, frame, config, info, piece_map = read_network(path)
-        return cls.from_pieces(pieces, frame, config, info, piece_map)
+        try:
+            return cls.from_pieces(pieces, frame, config, info, piece_map)
+        except ConfigError as exc:
+            raise NetworkFileError(f"{path}: corrupt network file ({exc})") from None
 
     def __repr__(self) -> str:
         return (f"Network({plural(self.n_neurons, 'neuron')} in "

@@ -65,7 +65,7 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
     each with :func:`piece_seed` of its own index, so the order does not change a bit).
     """
     absres = np.empty(hf.n_points)
-    seq_sum = 0.0
+    polish_gain = 0.0  # sum over points of |f - z| before the polish minus after it
     order = np.argsort(segmentation.labels, kind="stable")
     bounds = np.concatenate([[0], np.cumsum(segmentation.sizes)])
     pieces: list[Piece | None] = [None] * segmentation.n_pieces
@@ -94,7 +94,8 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
                 tick(learned.steps)
         res = np.abs(sub.z - piece.eval_unit(sub.xy, cfg.support)[0])
         absres[idx] = res
-        seq_sum += float(res.sum()) if seq is None else seq
+        if seq is not None:
+            polish_gain += seq - float(res.sum())
         piece.info["ebar"] = float(res.mean())
         pieces[i] = piece
     if np.isnan(d_min):  # every piece is a constant: report the rule's D_min all the same
@@ -102,4 +103,5 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
                     else auto_d_min(hf.spacing, cfg.error_threshold), cfg.d_max)
     pm = PieceMap.of_points(hf.xy, segmentation.labels, hf.spacing)
     return PiecesLearned(tuple(pieces), pm, absres,  # type: ignore[arg-type]
-                         seq_sum / hf.n_points, steps, d_min, learn_s, polish_s)
+                         float(absres.mean()) + polish_gain / hf.n_points, steps, d_min,
+                         learn_s, polish_s)

@@ -110,6 +110,8 @@ def _pieces_line(s: dict[str, Any]) -> str:
         return f"1 ({pieces})"
     if not pieces:
         return "1"
+    if len(pieces) == 1:
+        return "1 (one network)"
     sizes = " / ".join(f"{p['n_points']:,}" for p in pieces[:6])
     more = f" / ... {len(pieces) - 6} more" if len(pieces) > 6 else ""
     small = sum(p["constant"] for p in pieces)

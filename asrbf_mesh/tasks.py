@@ -88,8 +88,9 @@ def _pieces_summary(net: Network) -> list[dict[str, Any]] | str:
     if net.info.get("streamed"):
         return ("one network: a streamed fit is not segmented (cutting a scan into pieces "
                 "needs all of its points at once)")
-    return [{"n_points": p.info.get("n_points"), "n_neurons": p.n_neurons,
-             "ebar": p.info.get("ebar", net.info.get("ebar") if net.n_pieces == 1 else None),
+    whole = net.info if net.n_pieces == 1 else {}  # a single network's figures are its own
+    return [{"n_points": p.info.get("n_points", whole.get("n_points")),
+             "n_neurons": p.n_neurons, "ebar": p.info.get("ebar", whole.get("ebar")),
              "constant": bool(p.info.get("constant", False))} for p in net.pieces]
 
 

@@ -152,7 +152,7 @@ def test_the_graph_sees_every_module_and_relative_import() -> None:
     assert {"asrbf_mesh._network_kernels", "asrbf_mesh.errors", "numpy"} <= targets
     # ``from .._io import Scan`` one package up, and an import inside a function
     assert ("asrbf_mesh._io", False) in graph["asrbf_mesh.evaluate._metro"]
-    assert ("asrbf_mesh._learn", True) in graph["asrbf_mesh.evaluate._som"]
+    assert ("asrbf_mesh._fit", True) in graph["asrbf_mesh.evaluate._som"]
 
 
 def test_core_imports_neither_evaluation_nor_front_ends_nor_heavy_libraries() -> None:

@@ -42,7 +42,6 @@ import plyfile
 import pytest
 
 import asrbf_mesh as am
-from asrbf_mesh._network import FORMAT_VERSION
 from asrbf_mesh.cli import main
 from asrbf_mesh.errors import AsrbfError, NetworkFileError, ScanError
 from asrbf_mesh.evaluate._report import load_compare

@@ -59,7 +59,7 @@ def _same_network(a: am.Network, b: am.Network) -> None:
 
 def test_streaming_equals_the_in_memory_fit_in_the_same_order(
         streamed: am.Network, points: np.ndarray) -> None:
-    mem = am.fit(points, seed=2, progress=False,
+    mem = am.fit(points, seed=2, progress=False, pieces=1,  # a streamed fit is one network
                  order=lambda rng: block_order(N, CHUNK, 2, rng))
     _same_network(streamed, mem)
     assert streamed.log.counters() == mem.log.counters()
