@@ -137,7 +137,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
         raise ConfigError("order applies to a single network: pass pieces=1")
     polish = polish_kind(hf.fold, cfg.polish)
     common = (source, source_hash(points), int(seed), n_stray or None)
-    if seg is None or seg.n_pieces == 1 or _scattered(seg):
+    if seg is None or seg.n_pieces == 1 or (pieces == "auto" and _scattered(seg)):
         return _fit_single(hf, cfg, polish, seed, progress, order, t0, *common)
     return _fit_pieces(hf, seg, cfg, polish, seed, progress, t0, *common)
 

@@ -1,14 +1,16 @@
-"""One network per smooth piece vs one network for the whole scan (private prototype).
+"""Piecewise model (``--pieces auto``, the default) vs the paper's single network (``1``).
 
 Run from the repository root:  python scripts/bench_pieces.py [--seeds 0 1 2]
 
 For the face map and the Stanford bunny scans (read from the folder named by
-$ASRBF_BUNNY_DIR; skipped without it), fit each scan with each seed twice: one network
-(``am.fit``, defaults) and one network per piece of ``am.segment`` (defaults) in the
-whole scan's frame (``asrbf_mesh._pieces.fit_pieces``, same FitConfig). Prints one
+$ASRBF_BUNNY_DIR; skipped without it), fit each scan with each seed both ways
+(``am.fit(scan, pieces=1)`` and ``am.fit(scan)``) and mesh the default reconstruction
+(``am.reconstruct(net, footprint=scan)``: mode scan at the scan's spacing). Prints one
 Markdown table, each cell the median over the seeds and, in brackets, the worst seed:
-neurons K, E-bar (mean |f - z| in the unit cube over all N points), N:K and the wall
-time of the call (the pieces' time includes the segmentation).
+neurons K, N:K, E-bar (mean |f - z| in the unit cube over all N points), fit seconds,
+and the 99.9th percentile and maximum of the vertex-to-surface distances of the
+reconstruction both ways (scan vertices -> mesh, mesh vertices -> scan mesh), in % of
+the scan's bounding-box diagonal.
 """
 
 from __future__ import annotations
@@ -20,15 +22,17 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _bench_common import machine, scans, table, timed, write_section  # noqa: E402
 
 import asrbf_mesh as am  # noqa: E402
-from asrbf_mesh._pieces import fit_pieces  # noqa: E402
+from asrbf_mesh._igl import point_mesh_distance  # noqa: E402
 
-HEADERS = ["scan", "N", "pieces (small)", "K single", "K pieces", "E̅ single", "E̅ pieces",
-           "N:K single", "N:K pieces", "s single", "s pieces"]
+HEADERS = ["scan", "N", "model", "pieces", "K", "N:K", "E̅", "fit s",
+           "scan→mesh 99.9 % / max", "mesh→scan 99.9 % / max"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,21 +43,24 @@ def main(argv: list[str] | None = None) -> int:
     warm = next(iter(found.values()))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        am.fit(warm.points[:2000], seed=0, progress=False)  # compile the kernels first
+        am.fit(warm, seed=0, progress=False)  # compile the kernels first
     t0 = time.perf_counter()
-    rows = [_row(name, scan, args.seeds) for name, scan in found.items()]
+    rows = []
+    for name, scan in found.items():
+        rows += _rows(name, scan, args.seeds)
     seeds = ", ".join(map(str, args.seeds))
-    body = (f"## One network per piece (issue 14, prototype): seeds {seeds}\n\n"
+    body = (f"## Piecewise model vs the single network (issue 14): seeds {seeds}\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py` ({time.perf_counter() - t0:.0f} s)._\n\n"
-            "Single: `am.fit` with defaults. Pieces: `am.segment` (defaults), then one "
-            "network per piece (learning + the default weights polish) in the whole scan's "
-            "unit cube, so every piece uses the same E, E_ω, D_max and D_min (from the whole "
-            "scan's spacing); small pieces (under 30 points) get a constant. E̅ is the mean "
-            "|f − z| in the unit cube over all N points, each by its own piece's network. "
-            "Each cell: median over the seeds (worst seed); seconds are the wall time of the "
-            "call, the pieces' including the segmentation. Private prototype "
-            "(`asrbf_mesh._pieces.fit_pieces`), not in the API or the command line yet.\n\n"
+            "Single: `am.fit(scan, pieces=1)` (`--pieces 1`, the paper's model). Pieces: "
+            "`am.fit(scan)` (`--pieces auto`, the default): the scan cut by `am.segment` "
+            "(defaults), one network per piece in the whole scan's unit cube with the same "
+            "thresholds, pieces under 30 points a constant. E̅: mean |f − z| in the unit "
+            "cube over all N points, each by its own piece. Distances: the default "
+            "reconstruction (`am.reconstruct(net, footprint=scan)`, mode scan at the "
+            "scan's spacing; pieces stitched by walls) against the scan mesh, vertex to "
+            "surface (libigl), 99.9th percentile / maximum in % of the bounding-box "
+            "diagonal. Each cell: median over the seeds (worst seed).\n\n"
             + table(HEADERS, rows))
     print(body)
     write_section("pieces", body)
@@ -64,26 +71,32 @@ def _cell(values: list[float], fmt: str, worst=max) -> str:
     return f"{format(statistics.median(values), fmt)} ({format(worst(values), fmt)})"
 
 
-def _row(name: str, scan: am.Scan, seeds: list[int]) -> list:
-    single, pieces = [], []
-    seg = None
-    for seed in seeds:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            net, s1 = timed(am.fit, scan, seed=seed, progress=False)
-            pf, s2 = timed(fit_pieces, scan, seed=seed)
-        n = pf.n_points
-        seg = pf.segmentation
-        single.append((net.n_neurons, net.info["ebar"], n / max(net.n_neurons, 1), s1))
-        pieces.append((pf.n_neurons, pf.ebar, n / max(pf.n_neurons, 1), s2))
-        print(f"{name} seed {seed}: single K {net.n_neurons} E {net.info['ebar']:.5f} "
-              f"{s1:.1f} s; pieces K {pf.n_neurons} E {pf.ebar:.5f} {s2:.1f} s", flush=True)
-    col = list(zip(*single, strict=True)), list(zip(*pieces, strict=True))
-    return [name, f"{scan.n_points:,}", f"{seg.n_pieces} ({int(seg.small.sum())})",
-            _cell(col[0][0], ","), _cell(col[1][0], ","),
-            _cell(col[0][1], ".5f"), _cell(col[1][1], ".5f"),
-            _cell(col[0][2], ".0f", min), _cell(col[1][2], ".0f", min),
-            _cell(col[0][3], ".1f"), _cell(col[1][3], ".1f")]
+def _rows(name: str, scan: am.Scan, seeds: list[int]) -> list[list]:
+    diag = scan.bbox_diagonal
+    ref = am.Mesh(scan.points, scan.faces)
+    out = []
+    for label, pieces in (("single", 1), ("pieces", "auto")):
+        rec = []
+        for seed in seeds:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                net, sec = timed(am.fit, scan, seed=seed, pieces=pieces, progress=False)
+                mesh = am.reconstruct(net, footprint=scan)
+            to_mesh = 100 * point_mesh_distance(scan.points, mesh) / diag
+            to_scan = 100 * point_mesh_distance(mesh.vertices, ref) / diag
+            n = net.info["n_points"]
+            rec.append((net.n_pieces, net.n_neurons, n / max(net.n_neurons, 1),
+                        net.info["ebar"], sec, np.percentile(to_mesh, 99.9), to_mesh.max(),
+                        np.percentile(to_scan, 99.9), to_scan.max()))
+            print(f"{name} {label} seed {seed}: K {net.n_neurons} E {net.info['ebar']:.5f} "
+                  f"{sec:.1f} s, 99.9 % {rec[-1][5]:.2f} / {rec[-1][7]:.2f} %", flush=True)
+        c = list(zip(*rec, strict=True))
+        out.append([name, f"{scan.n_points:,}", label, str(int(statistics.median(c[0]))),
+                    _cell(c[1], ","), _cell(c[2], ".0f", min), _cell(c[3], ".5f"),
+                    _cell(c[4], ".2f"),
+                    f"{_cell(c[5], '.2f')} / {_cell(c[6], '.2f')}",
+                    f"{_cell(c[7], '.2f')} / {_cell(c[8], '.2f')}"])
+    return out
 
 
 if __name__ == "__main__":

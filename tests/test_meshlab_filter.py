@@ -119,7 +119,7 @@ def test_filter_parameter_values_resolve_defaults_on_the_meshset(ms) -> None:
     diag = float(np.linalg.norm(np.ptp(bump_arrays()[0], axis=0)))
     vals = mf.filter_parameter_values(ms, "meshing_close_holes_asrbf")
     assert vals == {"maxholesize": pytest.approx(diag), "selected": False,
-                    "newfaceselected": True, "seed": 0, "viewaxis": 0}
+                    "newfaceselected": True, "seed": 0, "pieces": 0, "viewaxis": 0}
     ms.add_mesh(ms.current_mesh(), "copy")
     vals = mf.filter_parameter_values(ms, "get_metro_distance")
     assert vals["sampledmesh"] == 1 and vals["targetmesh"] == 0
