@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import pickle
 import warnings
 import zipfile
@@ -178,3 +179,47 @@ def test_reconstruct_meshes_each_piece_and_walls_between_them(fitted) -> None:
     assert edge_use(mesh).max() == 2
     # the same outer border as the single network's mesh, plus the wall's two ends
     assert np.sum(edge_use(mesh) == 1) == np.sum(edge_use(ramp) == 1) + 2
+
+
+def test_a_format_1_file_still_loads(tmp_path) -> None:
+    import io
+    import json
+
+    net = am.fit(cliff_scan(), seed=0, pieces=1, progress=False)
+    meta = {"format": "asrbf-network", "format_version": 1, "dtype": "float64",
+            "frame": net.frame.to_dict(), "config": net.config.to_dict(),
+            "info": {"n_points": 1800}, "log_counters": None}
+    members = {"meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
+               "a0": np.array([net.a0]), "centers": net.centers, "widths": net.widths,
+               "weights": net.weights}
+    path = tmp_path / "v1.asrbf"
+    with zipfile.ZipFile(path, "w") as zf:
+        for name, arr in members.items():
+            buf = io.BytesIO()
+            np.save(buf, arr, allow_pickle=False)
+            zf.writestr(f"{name}.npy", buf.getvalue())
+    back = am.Network.load(path)
+    assert back.n_pieces == 1 and back.a0 == net.a0 and back.info == {"n_points": 1800}
+    q = np.random.default_rng(0).random((50, 2))
+    np.testing.assert_array_equal(back.evaluate(q, unit=True), net.evaluate(q, unit=True))
+
+
+def test_the_command_line_fits_pieces_and_info_shows_them(tmp_path, capsys) -> None:
+    from asrbf_mesh.cli import main
+
+    scan = cliff_scan()
+    path = tmp_path / "cliff.ply"
+    am.save_mesh(am.Mesh(scan.points, scan.faces), path)
+    assert main(["fit", str(path), "-o", str(tmp_path / "a.asrbf"), "--json"]) == 0
+    auto = json.loads(capsys.readouterr().out)
+    assert main(["fit", str(path), "-o", str(tmp_path / "b.asrbf"), "--pieces", "1",
+                 "--json"]) == 0
+    single = json.loads(capsys.readouterr().out)
+    assert auto["n_pieces"] == 2 and single["n_pieces"] == 1
+    assert auto["ebar"] < single["ebar"] and len(auto["pieces"]) == 2
+    assert main(["info", str(tmp_path / "a.asrbf")]) == 0
+    assert "pieces             2 (900 / 900 points)" in capsys.readouterr().out
+    assert main(["fit", str(path), "-o", str(tmp_path / "c.asrbf"), "--stream",
+                 "--json"]) == 0
+    streamed = json.loads(capsys.readouterr().out)
+    assert streamed["n_pieces"] == 1 and "not segmented" in streamed["pieces"]
