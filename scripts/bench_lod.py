@@ -70,24 +70,28 @@ def run_scan(name: str, scan: am.Scan, out_root: str) -> dict:
         if not targets or nbytes > 1.02 * targets[-1]:
             targets.append(nbytes)
     for nbytes in targets:
-        f = max(int(nbytes / 19), 8)  # about 12 V + 13 F with V ~ F / 2
-        for _ in range(3):
-            t = time.perf_counter()
-            mesh = _simplify.fast_decimate(ref, target_faces=f, preserve_border=False)
-            sec = time.perf_counter() - t
-            got = ply_bytes(mesh.n_vertices, mesh.n_faces)
-            if abs(got - nbytes) <= 0.05 * nbytes or (got > nbytes and f <= 8):
-                break
-            f = max(int(f * nbytes / got), 8)
-        d = _meshlab.hausdorff(mesh, ref)
         ours = [f"{m} L{r['index']}: {r['rms_pct']:.3g}" for m, st in res["sets"].items()
                 for r in st["manifest"]["levels"] if abs(r["bytes"] - nbytes) <= 0.02 * nbytes]
-        free.append({"target_bytes": nbytes, "bytes": got, "faces": mesh.n_faces,
-                     "ours": "; ".join(ours),
-                     "mean_pct": d["mean_pct"], "rms_pct": d["rms_pct"],
-                     "hausdorff_pct": d["hausdorff_pct"], "seconds": sec})
+        free.append(free_qem(ref, nbytes) | {"ours": "; ".join(ours)})
     res["free"] = free
     return res
+
+
+def free_qem(ref: am.Mesh, nbytes: int) -> dict:
+    """QEM (fast-simplification, free border) whose binary PLY takes about ``nbytes``."""
+    f = max(int(nbytes / 19), 8)  # about 12 V + 13 F with V ~ F / 2
+    for _ in range(3):
+        t = time.perf_counter()
+        mesh = _simplify.fast_decimate(ref, target_faces=f, preserve_border=False)
+        sec = time.perf_counter() - t
+        got = ply_bytes(mesh.n_vertices, mesh.n_faces)
+        if abs(got - nbytes) <= 0.05 * nbytes or (got > nbytes and f <= 8):
+            break
+        f = max(int(f * nbytes / got), 8)
+    d = _meshlab.hausdorff(mesh, ref)
+    return {"target_bytes": nbytes, "bytes": got, "faces": mesh.n_faces,
+            "mean_pct": d["mean_pct"], "rms_pct": d["rms_pct"],
+            "hausdorff_pct": d["hausdorff_pct"], "seconds": sec}
 
 
 def lod_table(res: dict) -> str:

@@ -38,7 +38,11 @@ HEADERS = ["scan", "N", "model", "pieces", "K", "N:K", "E̅", "fit s",
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--lod", action="store_true",
+                    help="only the LOD part: 4 resample levels per scan, model and seed")
     args = ap.parse_args(argv)
+    if args.lod:
+        return lod_main(args.seeds)
     found = scans()
     warm = next(iter(found.values()))
     with warnings.catch_warnings():
@@ -64,6 +68,66 @@ def main(argv: list[str] | None = None) -> int:
             + table(HEADERS, rows))
     print(body)
     write_section("pieces", body)
+    return 0
+
+
+LOD_HEADERS = ["scan", "model", "RMS by level 0→3 (%)", "RMS never falls", "worst 99.9 % "
+               "scan→mesh", "worst 99.9 % mesh→scan", "level 0 RMS / QEM at equal bytes"]
+
+
+def lod_main(seeds: list[int]) -> int:
+    """LOD targets: monotone RMS, 99.9th percentiles per level, finest level vs free QEM."""
+    import tempfile
+
+    from bench_lod import free_qem
+
+    from asrbf_mesh._lod import network_file_bytes
+    from asrbf_mesh.evaluate import write_lod_set
+
+    t0 = time.perf_counter()
+    rows = []
+    for name, scan in scans().items():
+        diag = scan.bbox_diagonal
+        ref = am.Mesh(scan.points, scan.faces)
+        used = np.unique(scan.faces)
+        for label, pieces in (("single", 1), ("pieces", "auto")):
+            rms, mono, p_sm, p_ms, ratio = [], [], [], [], []
+            for seed in seeds:
+                with warnings.catch_warnings(), tempfile.TemporaryDirectory() as tmp:
+                    warnings.simplefilter("ignore")
+                    net = am.fit(scan, seed=seed, pieces=pieces, progress=False)
+                    levels = am.lod_set(scan, levels=4, net=net, seed=seed)
+                    man = write_lod_set(scan, levels, tmp)
+                r = [lv["rms_pct"] for lv in man["levels"]]
+                rms.append(r)
+                mono.append(all(b >= a for a, b in zip(r, r[1:], strict=False)))
+                p_sm.append(max(np.percentile(point_mesh_distance(scan.points[used], lv.mesh),
+                                              99.9) for lv in levels) * 100 / diag)
+                p_ms.append(max(np.percentile(point_mesh_distance(lv.mesh.vertices, ref), 99.9)
+                                for lv in levels) * 100 / diag)
+                q = free_qem(ref, network_file_bytes(net))
+                ratio.append(r[0] / q["rms_pct"])
+                print(f"{name} {label} seed {seed}: RMS {r}, 99.9 {p_sm[-1]:.2f} / "
+                      f"{p_ms[-1]:.2f} %, level 0 / QEM {ratio[-1]:.2f}", flush=True)
+            med = np.median(np.array(rms), axis=0)
+            rows.append([name, label, " / ".join(f"{v:.3f}" for v in med),
+                         f"{sum(mono)} of {len(mono)} seeds", _cell(p_sm, ".2f"),
+                         _cell(p_ms, ".2f"), _cell(ratio, ".2f")])
+    body = (f"## LOD sets of the piecewise model (issue 14): seeds {', '.join(map(str, seeds))}"
+            f"\n\n_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
+            f"`python scripts/bench_pieces.py --lod` ({time.perf_counter() - t0:.0f} s)._\n\n"
+            "`am.lod_set(scan, levels=4, net=am.fit(scan, pieces=...))` (what `asrbf lod` "
+            "does; resample: one model sampled on grids twice as coarse per level, each piece "
+            "on its own cells, walls between them). RMS: Metro RMS against the scan mesh "
+            "(`write_lod_set`), % of the diagonal, median over the seeds. 99.9 %: the "
+            "worst level's 99.9th percentile of vertex-to-surface distances (scan vertices "
+            "used by faces → level mesh; level vertices → scan mesh), % of the diagonal. "
+            "QEM: fast-simplification with a free border, decimated until its binary PLY "
+            "takes the bytes of the `.asrbf` file a LOD set ships (float32, no log); the "
+            "ratio is level 0's Metro RMS over the QEM mesh's. Cells: median (worst seed).\n\n"
+            + table(LOD_HEADERS, rows))
+    print(body)
+    write_section("pieces-lod", body)
     return 0
 
 
