@@ -71,6 +71,24 @@ class Footprint:
         lab = self.label_at(q)
         return ~np.isin(lab, list(self.outside)) & self._in_raster(q)
 
+    def touching(self, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+        """Cells of the grid ``gx`` x ``gy`` holding any raster cell on the scan or in a hole.
+
+        ``(len(gy) - 1, len(gx) - 1)`` bool. Unlike testing cell centres with
+        :meth:`inside`, a fragment or a strip narrower than a grid cell keeps a cell.
+        """
+        ny, nx = self.labels.shape
+        inside = ~np.isin(self.labels, list(self.outside))
+        j, i = np.nonzero(inside)
+        cx = self.lo[0] + (i + 0.5) * self.cell
+        cy = self.lo[1] + (j + 0.5) * self.cell
+        ci = np.searchsorted(gx, cx, side="right") - 1
+        cj = np.searchsorted(gy, cy, side="right") - 1
+        ok = (ci >= 0) & (ci < len(gx) - 1) & (cj >= 0) & (cj < len(gy) - 1)
+        keep = np.zeros((len(gy) - 1, len(gx) - 1), dtype=bool)
+        keep[cj[ok], ci[ok]] = True
+        return keep
+
     def _in_raster(self, q: np.ndarray) -> np.ndarray:
         ny, nx = self.labels.shape
         ij = np.floor((np.asarray(q) - self.lo) / self.cell).astype(np.int64)

@@ -339,7 +339,10 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     if d_mins is not None and method != "refit":
         raise ConfigError("d_mins applies to method 'refit' only")
     sc = _as_scan(scan)
-    fp_kw: dict[str, Any] = {"footprint": sc, "mode": "scan"} if footprint else {}
+    # every cell touching the footprint: a fragment or strip narrower than a coarse cell
+    # keeps its surface (the mesh's outer nodes end on the scan, see reconstruct)
+    fp_kw: dict[str, Any] = ({"footprint": sc, "mode": "scan", "coverage": "any"}
+                             if footprint else {})
 
     if method == "resample":
         # the grid spacings come from the scan alone: refuse too many levels before the fit

@@ -46,7 +46,7 @@ def grid_faces(nx: int, ny: int, keep: np.ndarray | None = None) -> np.ndarray:
 
 def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: float | None = None,
                 footprint: Scan | np.ndarray | None = None, mode: str | None = None,
-                margin_rel: float = 0.0) -> Mesh:
+                margin_rel: float = 0.0, coverage: str = "centre") -> Mesh:
     """Mesh the network surface on a regular grid, in physical units.
 
     Parameters
@@ -71,6 +71,11 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         Default: ``scan`` with a footprint, else ``full``.
     margin_rel : float
         Extend the full square by this fraction on every side (mode ``full``).
+    coverage : {"centre", "any"}
+        Modes ``scan`` and ``hull``: mesh the grid cells whose centre lies on the
+        footprint (``centre``), or every cell that touches it (``any``: no fragment or
+        strip narrower than a cell is lost, at the price of up to one cell beyond the
+        border; coarse grids such as LOD levels want it).
 
     Returns
     -------
@@ -142,12 +147,20 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         mid_y = 0.5 * (gy[:-1] + gy[1:])
         centres = np.stack(np.meshgrid(mid_x, mid_y), -1).reshape(-1, 2)
         keep = fp.inside(centres).reshape(ny - 1, nx - 1)
-    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep)
+        if check_choice(coverage, "coverage", ("centre", "any")) == "any":
+            keep |= fp.touching(gx, gy)
+
+    # nodes reaching past the border are moved onto the scan only with coverage "any" (up
+    # to a whole cell out); nodes past a cliff into another piece's territory always
+    snap = None if mode == "full" else (local_xy, fp, coverage == "any")
+    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap)
     return mesh
 
 
 def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.ndarray | None,
-                    *, walls: bool = True) -> tuple[Mesh, np.ndarray, np.ndarray]:
+                    *, walls: bool = True,
+                    snap: tuple[np.ndarray, Footprint, bool] | None = None
+                    ) -> tuple[Mesh, np.ndarray, np.ndarray]:
     """Mesh each piece of ``net`` on the grid cells it owns, stitched by walls.
 
     ``xy`` holds the ``nx`` x ``ny`` grid nodes (row-major, local physical units) and
@@ -157,6 +170,13 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     ``walls``, the grid edge between two cells of different pieces becomes a wall of two
     triangles between the two pieces' vertices of its end nodes: no ramp across a depth
     jump, and no crack either. A one-piece network gives the plain grid mesh.
+
+    ``snap`` (the scan's view-plane points, its footprint and whether to snap border
+    nodes): a vertex whose node lies in another piece's territory (a cell of one piece
+    reaching past a cliff), or with the flag set beyond the footprint (a border cell
+    reaching past the scan's border), moves to the nearest scan sample of its own piece,
+    so the mesh ends on the scan instead of extrapolating a surface past it. Nodes over
+    holes stay: they are the fill.
 
     Returns
     -------
@@ -189,10 +209,32 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     uniq, inverse = np.unique(keys.ravel(), return_inverse=True)
     node, piece = uniq % n_nodes, uniq // n_nodes
     pts = xy[node]
+    if snap is not None:
+        pts = _snap(net, pts, piece, *snap)
     which = None if net.n_pieces == 1 else piece
     mesh = Mesh(net.surface_points(pts, piece=which), inverse.reshape(-1, 3),
                 vertex_normals=net.normals(pts, piece=which))
     return mesh, pts, piece
+
+
+def _snap(net: Network, pts: np.ndarray, piece: np.ndarray, scan_xy: np.ndarray,
+          fp: Footprint, border: bool) -> np.ndarray:
+    """Move vertices off their piece (or off the footprint) onto their piece's nearest sample."""
+    from scipy.spatial import cKDTree
+
+    stray = ~fp.inside(pts) if border else np.zeros(len(pts), dtype=bool)
+    if net.n_pieces > 1:
+        stray |= net.piece_at(pts) != piece
+    if not stray.any():
+        return pts
+    pts = pts.copy()
+    owner = net.piece_at(scan_xy) if net.n_pieces > 1 else np.zeros(len(scan_xy), np.int64)
+    for p in np.unique(piece[stray]):
+        mine = scan_xy[owner == p]
+        which = np.flatnonzero(stray & (piece == p))
+        if len(mine):
+            pts[which] = mine[cKDTree(mine).query(pts[which])[1]]
+    return pts
 
 
 def _wall_keys(nx: int, ny: int, keep: np.ndarray, owner: np.ndarray,

@@ -223,3 +223,21 @@ def test_the_command_line_fits_pieces_and_info_shows_them(tmp_path, capsys) -> N
                  "--json"]) == 0
     streamed = json.loads(capsys.readouterr().out)
     assert streamed["n_pieces"] == 1 and "not segmented" in streamed["pieces"]
+
+
+def test_coverage_any_keeps_a_fragment_narrower_than_a_cell() -> None:
+    from asrbf_mesh._igl import point_mesh_distance
+
+    scan = cliff_scan(fragment=True)  # a 5 x 2 fragment beside the grid
+    net = am.fit(scan, seed=0, progress=False)
+    frag = scan.points[-10:]
+    coarse = {cov: am.reconstruct(net, spacing_abs=8.0, footprint=scan, coverage=cov)
+              for cov in ("centre", "any")}
+    assert point_mesh_distance(frag, coarse["centre"]).max() > 3.0  # lost at this grid
+    assert point_mesh_distance(frag, coarse["any"]).max() < 1.0
+    # the cells reaching past the border end on the scan: no vertex beyond its samples
+    v = coarse["any"].vertices
+    assert v[:, 0].max() <= scan.points[:, 0].max() + 1e-9
+    assert v[:, 1].max() <= scan.points[:, 1].max() + 1e-9
+    with pytest.raises(am.ConfigError, match="^coverage must be one of"):
+        am.reconstruct(net, footprint=scan, coverage="all")
