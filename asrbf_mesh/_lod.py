@@ -92,8 +92,8 @@ class LodLevel:
     spacing_abs : float or None
         Grid spacing of the mesh, scan units.
     network : Network or None
-        The network the mesh was sampled from (the same object for every level of a
-        ``resample`` set).
+        The network the mesh was sampled from, as the set ships it (compact parameters,
+        read back from its file; the same object for every level of a ``resample`` set).
     """
 
     index: int
@@ -110,21 +110,29 @@ class LodLevel:
 # --------------------------------------------------------------------------- sizes
 
 
-def _shippable(net: Network) -> Network:
-    """Return the network as shipped: without its learning log (saved as float32)."""
-    return net.without_logs()
-
-
 def _save_network(net: Network, path: Path, inputs: tuple[str, ...] = ()) -> Path:
-    return _shippable(net).save(path, float32=True, inputs=inputs)
+    """Write ``net`` as a LOD set ships it: compact parameters, no learning log."""
+    return net.without_logs().save(path, compact=True, inputs=inputs)
+
+
+def shipped(net: Network) -> tuple[Network, int]:
+    """Return the network as a LOD set ships it (written, read back) and its file size.
+
+    The levels are meshed from this network, so a reader who rebuilds a level from the
+    file gets the same mesh.
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _save_network(net, Path(tmp) / "n.asrbf")
+        return Network.load(path), path.stat().st_size
 
 
 def network_file_bytes(net: Network) -> int:
     """Size in bytes of ``net`` written as a ``.asrbf`` file for a LOD set.
 
-    The file is what :func:`write_lod_set` writes: float32 neuron parameters, frame,
-    configuration and provenance (JSON), deflated; without the learning log (a
-    history for plots, not part of the surface).
+    The file is what :func:`write_lod_set` writes: compact neuron parameters (uint16
+    centres, float16 widths and weights), frame, configuration, piece map and provenance
+    (JSON), deflated; without the learning log (a history for plots, not part of the
+    surface).
 
     Examples
     --------
@@ -134,8 +142,7 @@ def network_file_bytes(net: Network) -> int:
     >>> 1000 < network_file_bytes(net) < 4000
     True
     """
-    with tempfile.TemporaryDirectory() as tmp:
-        return _save_network(net, Path(tmp) / "n.asrbf").stat().st_size
+    return shipped(net)[1]
 
 
 def ply_bytes(n_vertices: int, n_faces: int) -> int:
@@ -361,7 +368,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         _check_coarsest(levels, frame.scale[:2], lambda i: s0 * 2.0 ** min(i, 200))
         if net is None:
             net = fit(sc, seed=seed, pieces=pieces, progress=False)
-        nbytes = network_file_bytes(net)
+        net, nbytes = shipped(net)
         out = []
         for i in range(levels):
             t = time.perf_counter()
@@ -403,8 +410,8 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         t = time.perf_counter()
         ni = fit(sc, base_cfg.replace(d_min=d), seed=seed, view_axis=view_axis,
                  pieces=pieces, progress=False)
+        ni, nbytes = shipped(ni)
         mesh = reconstruct(ni, spacing_abs=s, **fp_kw)
         seconds = time.perf_counter() - t
-        out.append(LodLevel(i, "refit", mesh, network_file_bytes(ni), d, ni.n_neurons,
-                            seconds, s, ni))
+        out.append(LodLevel(i, "refit", mesh, nbytes, d, ni.n_neurons, seconds, s, ni))
     return out

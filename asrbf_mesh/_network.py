@@ -475,7 +475,7 @@ class Network:
         return n @ self.frame.rotation.T
 
     # -- file -------------------------------------------------------------------------------
-    def save(self, path: str | os.PathLike, *, float32: bool = False,
+    def save(self, path: str | os.PathLike, *, float32: bool = False, compact: bool = False,
              inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
         """Write a versioned ``.asrbf`` file (format 2) atomically.
 
@@ -489,11 +489,15 @@ class Network:
             Output file.
         float32 : bool
             Store the neuron parameters in single precision (half the size).
+        compact : bool
+            Centres as uint16 over their bounding box, widths and weights as float16 (a
+            quarter of the size; what a LOD set ships): centres within 2.3e-5 of the unit
+            square, widths and weights within a relative 4.9e-4.
         inputs : paths
             Input files the output must not overwrite.
         """
         return write_network(path, self.pieces, self.frame, self.config, self.info,
-                             self.piece_map, float32=float32, inputs=inputs)
+                             self.piece_map, float32=float32, compact=compact, inputs=inputs)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Network:

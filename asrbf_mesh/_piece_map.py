@@ -3,8 +3,10 @@
 A :class:`PieceMap` is a raster over the unit square (extended to the data) whose cells
 hold the piece of the nearest scan point, so every point of the plane, on the scan,
 in a hole or beyond the border, has exactly one piece: the surface a piecewise network
-evaluates there. Cells are one sampling spacing wide: a cliff is placed within half a
-spacing of the middle between the last samples of its two sides.
+evaluates there. Cells are one sampling spacing wide, or a half or a third of it where
+the pieces' samples interleave at a cliff: the coarsest of these at which at least
+:data:`MIN_AGREEMENT` of the points fall in cells of their own piece (on bun090, the
+Stanford bunny seen from the side, 98.9 % at one spacing, 99.94 % at a half).
 """
 
 from __future__ import annotations
@@ -16,10 +18,13 @@ import numpy as np
 from ._validate import readonly
 from .errors import ConfigError
 
-__all__ = ["PieceMap", "MAX_MAP_CELLS"]
+__all__ = ["PieceMap", "MAX_MAP_CELLS", "MIN_AGREEMENT"]
 
 #: Upper bound on the raster's cells; a finer spacing coarsens the cells to fit.
 MAX_MAP_CELLS = 4_000_000
+#: Share of the points whose own piece the map must give back (see the module text).
+MIN_AGREEMENT = 0.999
+_CELL_FACTORS = (1.0, 0.5, 1.0 / 3.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,14 +75,32 @@ class PieceMap:
     def of_points(cls, uv: np.ndarray, labels: np.ndarray, spacing: float) -> PieceMap:
         """Map of labelled unit-square points: each cell takes its nearest point's piece.
 
-        The raster spans the unit square and the points, plus two cells; its cells are
-        ``spacing`` wide (coarser if that would exceed :data:`MAX_MAP_CELLS`). A cell
-        holding points of several pieces takes the piece of the last of them in input
-        order (deterministic); empty cells take the nearest occupied cell's piece.
+        Cells ``spacing`` wide, else a half or a third of it: the coarsest whose map
+        gives at least :data:`MIN_AGREEMENT` of the points their own piece (the finest
+        tried when none does).
+        """
+        uv = np.asarray(uv, dtype=np.float64)
+        best, best_share = None, -1.0
+        for factor in _CELL_FACTORS:
+            pm = cls._raster(uv, labels, spacing * factor)
+            share = float(np.mean(pm.piece_at(uv) == labels)) if len(uv) else 1.0
+            if share > best_share:
+                best, best_share = pm, share
+            if share >= MIN_AGREEMENT:
+                break
+        return best  # type: ignore[return-value]
+
+    @classmethod
+    def _raster(cls, uv: np.ndarray, labels: np.ndarray, spacing: float) -> PieceMap:
+        """Build the raster at one cell size.
+
+        Cells ``spacing`` wide (coarser if that would exceed :data:`MAX_MAP_CELLS`),
+        spanning the unit square and the points plus two cells. A cell holding points of
+        several pieces takes the piece of the last of them in input order
+        (deterministic); empty cells take the nearest occupied cell's piece.
         """
         from scipy import ndimage
 
-        uv = np.asarray(uv, dtype=np.float64)
         lo = np.minimum(uv.min(axis=0), 0.0)
         hi = np.maximum(uv.max(axis=0), 1.0)
         cell = max(float(spacing), float(np.sqrt(np.prod(hi - lo) / MAX_MAP_CELLS)))

@@ -241,3 +241,35 @@ def test_coverage_any_keeps_a_fragment_narrower_than_a_cell() -> None:
     assert v[:, 1].max() <= scan.points[:, 1].max() + 1e-9
     with pytest.raises(am.ConfigError, match="^coverage must be one of"):
         am.reconstruct(net, footprint=scan, coverage="all")
+
+
+def test_compact_files_are_a_quarter_and_evaluate_within_their_rounding(fitted,
+                                                                        tmp_path) -> None:
+    scan, net = fitted
+    lean = net.without_logs()
+    full = lean.save(tmp_path / "f64.asrbf")
+    small = lean.save(tmp_path / "compact.asrbf", compact=True)
+    back = am.Network.load(small)
+    with zipfile.ZipFile(small) as zf:
+        assert zf.getinfo("centers.npy").file_size < zf.getinfo("widths.npy").file_size * 3
+    assert small.stat().st_size < full.stat().st_size
+    np.testing.assert_allclose(back.centers, net.centers, atol=3e-5)
+    np.testing.assert_allclose(back.widths, net.widths, rtol=5e-4)
+    hf = am.to_height_field(scan.points)
+    assert np.abs(back.evaluate(hf.xy, unit=True) - net.evaluate(hf.xy, unit=True)).max() < 2e-3
+    again = lean.save(tmp_path / "again.asrbf", compact=True)
+    assert again.read_bytes() == small.read_bytes()
+
+
+def test_the_piece_map_refines_its_cells_until_the_points_agree() -> None:
+    from asrbf_mesh._piece_map import MIN_AGREEMENT, PieceMap
+
+    rng = np.random.default_rng(0)
+    uv = rng.random((4000, 2))
+    labels = (uv[:, 0] + 0.01 * np.sin(40 * uv[:, 1]) > 0.5).astype(np.int64)  # wavy cut
+    spacing = 0.02
+    pm = PieceMap.of_points(uv, labels, spacing)
+    share = np.mean(pm.piece_at(uv) == labels)
+    assert pm.cell < spacing and (share >= MIN_AGREEMENT or pm.cell < 0.4 * spacing)
+    coarse = PieceMap._raster(uv, labels, spacing)
+    assert np.mean(coarse.piece_at(uv) == labels) < share

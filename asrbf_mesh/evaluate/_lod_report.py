@@ -145,11 +145,11 @@ def write_lod_set(scan: Scan | np.ndarray, levels: list[LodLevel], out_dir: str 
 
     Notes
     -----
-    ``bytes`` compares what each side must store. Ours: the network file (float32
-    parameters, deflated, with ~2 KB of JSON metadata; see
-    :func:`network_file_bytes`); a reader rebuilds the level from it, the grid spacing
-    and the footprint bitmap (``footprint_bytes``, reported apart: without it the
-    network meshes the whole square). QEM: the mesh as a float32 binary PLY
+    ``bytes`` compares what each side must store. Ours: the network file (compact
+    parameters: uint16 centres, float16 widths and weights; deflated, with ~2 KB of
+    JSON metadata; see :func:`network_file_bytes`); a reader rebuilds the level from
+    it, the grid spacing and the footprint bitmap (``footprint_bytes``, reported apart:
+    without it the network meshes the whole square). QEM: the mesh as a float32 binary PLY
     (:func:`ply_bytes`; the ``.ply`` files written here keep float64 vertices).
 
     Errors are Metro-style (:func:`asrbf_mesh.evaluate._meshlab.hausdorff`): both directions
@@ -276,7 +276,8 @@ def write_lod_set(scan: Scan | np.ndarray, levels: list[LodLevel], out_dir: str 
                              "all scan points, scan -> level only"},
         "definitions": {
             "bytes": "levels: size of the .asrbf network file the level is sampled from "
-                     "(float32 parameters, deflated, no learning log); a resample set "
+                     "(compact parameters: uint16 centres, float16 widths and weights; "
+                     "deflated, no learning log); a resample set "
                      "shares one network, so every level reports the same file. qem: "
                      "mesh_bytes",
             "mesh_bytes": "the mesh as a binary PLY of float32 vertices and int32 faces",
