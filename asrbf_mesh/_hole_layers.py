@@ -134,7 +134,7 @@ def _fill_chain(chain: np.ndarray, loop: bool, hole: Hole, ctx: Ctx, layer_faces
     g = grid_samples(poly.min(0), poly.max(0), ctx.spacing)
     if len(g):
         _, cand = cKDTree(poly[tris].mean(axis=1)).query(g, k=min(8, len(tris)))
-        g = g[_hk.inside_any(g, poly, tris, np.atleast_2d(cand).astype(np.int64))]
+        g = g[_hk.inside_any(g, poly, tris, cand)]
         g = away_from(g, poly, seg, 0.6 * ctx.spacing)
     pts = np.vstack([poly, g])
     tris, extra = triangulate(pts, seg, "pYQ")

@@ -190,7 +190,6 @@ def close_patch(pts: np.ndarray, rim: np.ndarray, seg: np.ndarray, tris: np.ndar
     cen = pts[tris].mean(axis=1)
     # drop triangles over the scan itself (islands inside the hole, concave rims)
     _, cand = cover_tree.query(cen, k=min(12, cover_tree.n))
-    cand = np.atleast_2d(cand).astype(np.int64)
     keep = ~_hk.inside_any(cen, ctx.xy, cover_faces, cand)
     if region is not None:
         keep &= region(cen)

@@ -1,4 +1,11 @@
-"""Compiled helpers of hole filling (private): triangle coverage raster, point location."""
+"""Compiled helpers of hole filling (private): triangle coverage raster, point location.
+
+Numba does not check array bounds: an index past an array reads or writes whatever
+memory lies there, and the process dies with a segmentation fault (a cKDTree query with
+``k=1`` returns a 1-D index array, which ``np.atleast_2d`` turned into one row for all
+points: bun090's punched seed 6 crashed that way). So the kernels are private and the
+public functions check shapes and index ranges first.
+"""
 
 from __future__ import annotations
 
@@ -11,8 +18,50 @@ def _orient(ax, ay, bx, by, cx, cy):
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
+def _faces_in(xy: np.ndarray, faces: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``xy`` (V, 2) float64 and ``faces`` (F, 3) int64, checked to index ``xy``."""
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ValueError(f"{what}: points must have shape (V, 2), got {xy.shape}")
+    if len(faces) and (faces.min() < 0 or faces.max() >= len(xy)):
+        raise ValueError(f"{what}: a triangle indexes a point that does not exist")
+    return xy, faces
+
+
+def coverage(xy: np.ndarray, faces: np.ndarray, lo: np.ndarray, cell: float, nx: int,
+             ny: int) -> np.ndarray:
+    """Raster (ny, nx) of cells whose centre lies in (or on) some triangle, in xy.
+
+    Raises
+    ------
+    ValueError
+        A triangle indexing a missing point, a bad raster size or cell.
+    """
+    xy, faces = _faces_in(xy, faces, "coverage")
+    if not (int(nx) >= 1 and int(ny) >= 1 and np.isfinite(cell) and cell > 0):
+        raise ValueError("coverage: the raster needs nx, ny >= 1 and a positive cell")
+    return _coverage(xy, faces, np.ascontiguousarray(lo, dtype=np.float64), float(cell),
+                     int(nx), int(ny))
+
+
+def inside_any(points: np.ndarray, xy: np.ndarray, faces: np.ndarray,
+               cand: np.ndarray) -> np.ndarray:
+    """For each point, whether it lies strictly inside one of its candidate triangles.
+
+    ``cand`` holds each point's candidate triangle indices, (M, k) or (M,) as a
+    ``cKDTree.query`` returns them for ``k`` = 1; an index past the last triangle
+    (``cKDTree``'s "no neighbour") or below 0 is skipped.
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    xy, faces = _faces_in(xy, faces, "inside_any")
+    cand = np.asarray(cand, dtype=np.int64).reshape(len(points), -1)
+    cand = np.where((cand >= 0) & (cand < len(faces)), cand, -1)
+    return _inside_any(points, xy, faces, np.ascontiguousarray(cand))
+
+
 @njit(cache=True)
-def coverage(xy, faces, lo, cell, nx, ny):
+def _coverage(xy, faces, lo, cell, nx, ny):
     """Raster (ny, nx) of cells whose centre lies in (or on) some triangle, in xy."""
     out = np.zeros((ny, nx), np.bool_)
     for t in range(faces.shape[0]):
@@ -44,7 +93,7 @@ def coverage(xy, faces, lo, cell, nx, ny):
 
 
 @njit(cache=True)
-def inside_any(points, xy, faces, cand):
+def _inside_any(points, xy, faces, cand):
     """For each point p, whether it lies strictly inside one of the candidate triangles cand[p]."""
     n = points.shape[0]
     out = np.zeros(n, np.bool_)

@@ -281,3 +281,27 @@ def test_hole_at_a_fold_is_filled_on_each_layer() -> None:
     on_back = np.abs(new[:, 2] - 0.05 * new[:, 1]) < 1e-6
     assert (on_front | on_back).all() and on_front.sum() > 20 and on_back.sum() > 20
     assert point_mesh_distance(truth, res.mesh).max() < 1e-6
+
+
+def test_point_location_takes_the_one_column_candidates_a_kdtree_gives_for_k_1() -> None:
+    """``cKDTree.query(k=1)`` returns (M,) indices; ``np.atleast_2d`` made them one row of
+    M columns, the compiled loop read rows past its array and bun090's punched seed 6
+    died with SIGSEGV in ``_fill_chain``."""
+    from scipy.spatial import cKDTree
+
+    from asrbf_mesh import _holes_kernels as hk
+
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    tri = np.array([[0, 1, 2]])
+    pts = np.random.default_rng(0).uniform(-0.2, 1.0, (500, 2))
+    _, cand = cKDTree(xy[tri].mean(axis=1)).query(pts, k=1)
+    assert cand.shape == (500,)
+    inside = hk.inside_any(pts, xy, tri, cand)
+    truth = (pts[:, 0] > 0) & (pts[:, 1] > 0) & (pts.sum(axis=1) < 1)
+    np.testing.assert_array_equal(inside, truth)
+    # "no neighbour" (index n) and negative indices are skipped, bad triangles refused
+    assert not hk.inside_any(pts[:3], xy, tri, np.full((3, 2), 1)).any()
+    with pytest.raises(ValueError, match="indexes a point that does not exist"):
+        hk.inside_any(pts, xy, np.array([[0, 1, 3]]), cand)
+    with pytest.raises(ValueError, match="indexes a point that does not exist"):
+        hk.coverage(xy, np.array([[0, 1, -1]]), np.zeros(2), 0.1, 10, 10)
