@@ -1,0 +1,166 @@
+"""The hole-filling benchmark's punch protocol: random disks, truth grouped into holes.
+
+For a scan and a seed ``s`` (``numpy.random.default_rng(s)``), vertices used by no face
+dropped first (in their original order), repeat up to 10,000 times, until 5 disks:
+
+- draw a vertex used by a face as centre ``c`` (view plane) and a radius
+  ``r = U(0.03, 0.06)`` times the larger xy extent;
+- reject the disk unless at least 30 points lie within ``r`` of ``c`` and the ring
+  ``r <= d < 1.6 r`` holds at least 1.35 times as many (a disk on the scan, not over its
+  border or a gap), and unless it lies at least ``1.8 (r + r')`` from every accepted disk.
+
+Every vertex within ``r`` of a centre, at all depths, is removed with every face that
+touches one; those vertices are the truth. Truth points connected within 3 median xy
+spacings form a hole; a hole whose truth points come within 0.4 % of the bounding-box
+diagonal of a vertex of the punched mesh's longest boundary loop is a *notch* of the
+outer border (left out); every other hole is *enclosed* and must be filled. A hole is
+scored by the RMS of its truth points' distances to the output surface, in % of the
+diagonal; the pooled RMS runs over all enclosed truth points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from .._frame import sampling_spacing
+from .._igl import boundary_loops, point_mesh_distance
+from .._mesh import Mesh, Scan
+from .._validate import check_seed
+from ..errors import ScanError
+
+__all__ = ["PunchedHoles", "punch_protocol", "score_holes", "DISKS", "MAX_TRIES"]
+
+DISKS = 5
+MAX_TRIES = 10_000
+
+
+@dataclass(frozen=True, eq=False)
+class PunchedHoles:
+    """A scan punched by the protocol, its truth grouped into holes.
+
+    Attributes
+    ----------
+    scan : Scan
+        The punched scan (unused vertices of the input dropped, then the disks).
+    truth : (T, 3) float64 array
+        The removed vertices.
+    hole : (T,) int64 array
+        The hole of each truth point.
+    enclosed : (H,) bool array
+        Whether each hole is enclosed (False: a notch of the outer border).
+    centres : (D, 2) float64 array
+    radii : (D,) float64 array
+    diagonal : float
+        Bounding-box diagonal of the input scan (the unit of the scores).
+    """
+
+    scan: Scan
+    truth: np.ndarray
+    hole: np.ndarray
+    enclosed: np.ndarray
+    centres: np.ndarray
+    radii: np.ndarray
+    diagonal: float
+
+    @property
+    def n_enclosed(self) -> int:
+        """Enclosed holes: the ones a fill must close."""
+        return int(self.enclosed.sum())
+
+
+def _used(scan: Scan) -> Scan:
+    if scan.faces is None or len(scan.faces) == 0:
+        raise ScanError(f"{scan.source or 'scan'}: the punch protocol needs a scan with faces")
+    used = np.zeros(scan.n_points, dtype=bool)
+    used[scan.faces.ravel()] = True
+    keep = np.flatnonzero(used)
+    remap = np.full(scan.n_points, -1, dtype=np.int64)
+    remap[keep] = np.arange(len(keep))
+    return Scan(scan.points[keep], remap[scan.faces], source=scan.source)
+
+
+def punch_protocol(scan: Scan, seed: int = 0) -> PunchedHoles:
+    """Punch ``scan`` by the protocol (module text) with ``seed``.
+
+    Raises
+    ------
+    ScanError
+        A scan without faces.
+    """
+    seed = check_seed(seed)
+    base = _used(scan)
+    pts = base.points
+    xy = np.ascontiguousarray(pts[:, :2])
+    extent = float(np.ptp(xy, axis=0).max())
+    tree = cKDTree(xy)
+    rng = np.random.default_rng(seed)
+    centres: list[np.ndarray] = []
+    radii: list[float] = []
+    for _ in range(MAX_TRIES):
+        if len(centres) == DISKS:
+            break
+        c = xy[rng.integers(len(xy))]
+        r = rng.uniform(0.03, 0.06) * extent
+        inner = len(tree.query_ball_point(c, r, return_sorted=False))
+        outer = len(tree.query_ball_point(c, 1.6 * r, return_sorted=False))
+        if inner < 30 or (outer - inner) < 1.35 * inner:
+            continue
+        if any(np.linalg.norm(c - c2) < 1.8 * (r + r2)
+               for c2, r2 in zip(centres, radii, strict=True)):
+            continue
+        centres.append(c)
+        radii.append(r)
+    cen = np.array(centres).reshape(-1, 2)
+    rad = np.array(radii)
+    removed = np.zeros(len(xy), dtype=bool)
+    for c, r in zip(cen, rad, strict=True):
+        removed[tree.query_ball_point(c, r)] = True
+    keep = np.flatnonzero(~removed)
+    remap = np.full(len(xy), -1, dtype=np.int64)
+    remap[keep] = np.arange(len(keep))
+    f = remap[base.faces]
+    punched = Scan(pts[keep], f[(f >= 0).all(axis=1)], source=scan.source)
+    truth = pts[removed]
+    hole, enclosed = _holes(truth, punched, xy, base.bbox_diagonal)
+    return PunchedHoles(punched, truth, hole, enclosed, cen, rad, base.bbox_diagonal)
+
+
+def _holes(truth: np.ndarray, punched: Scan, xy: np.ndarray,
+           diagonal: float) -> tuple[np.ndarray, np.ndarray]:
+    """Group truth points into holes; flag the holes that are not notches of the border."""
+    if len(truth) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
+    link = 3.0 * sampling_spacing(xy)
+    pairs = cKDTree(truth[:, :2]).query_pairs(link, output_type="ndarray")
+    from scipy.sparse import coo_matrix
+
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                       shape=(len(truth), len(truth)))
+    n, hole = connected_components(graph, directed=False)
+    loops = boundary_loops(punched.faces)
+    enclosed = np.ones(n, dtype=bool)
+    if loops:
+        border = punched.points[max(loops, key=len)]
+        d, _ = cKDTree(border).query(truth)
+        near = d <= 0.004 * diagonal
+        enclosed[np.unique(hole[near])] = False
+    return hole.astype(np.int64), enclosed
+
+
+def score_holes(punched: PunchedHoles, surface: Mesh) -> tuple[np.ndarray, float]:
+    """RMS distance (% of the diagonal) of each enclosed hole's truth points to ``surface``.
+
+    Returns the per-hole RMS, (H,) with NaN for notches, and the pooled RMS over all
+    enclosed truth points.
+    """
+    d = 100.0 * point_mesh_distance(punched.truth, surface) / punched.diagonal
+    rms = np.full(len(punched.enclosed), np.nan)
+    for h in np.flatnonzero(punched.enclosed):
+        rms[h] = float(np.sqrt(np.mean(d[punched.hole == h] ** 2)))
+    mask = punched.enclosed[punched.hole]
+    pooled = float(np.sqrt(np.mean(d[mask] ** 2))) if mask.any() else float("nan")
+    return rms, pooled
