@@ -155,14 +155,32 @@ def grid_samples(lo: np.ndarray, hi: np.ndarray, spacing: float) -> np.ndarray:
 
 def away_from(g: np.ndarray, pts: np.ndarray, seg: np.ndarray, gap: float) -> np.ndarray:
     """Keep the points of ``g`` farther than ``gap`` from every segment ``pts[seg]``."""
-    if len(g) == 0:
+    if len(g) == 0 or len(seg) == 0:
         return g
     a, b = pts[seg[:, 0]], pts[seg[:, 1]]
     d = b - a
     L2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
-    t = np.clip(((g[:, None, :] - a[None]) * d[None]).sum(-1) / L2, 0.0, 1.0)
-    near = np.linalg.norm(a[None] + t[..., None] * d[None] - g[:, None, :], axis=2).min(1)
-    return g[near > gap]
+    if len(g) * len(seg) <= 200_000:  # small: every point against every segment
+        t = np.clip(((g[:, None, :] - a[None]) * d[None]).sum(-1) / L2, 0.0, 1.0)
+        near = np.linalg.norm(a[None] + t[..., None] * d[None] - g[:, None, :], axis=2).min(1)
+        return g[near > gap]
+    # large: candidate segments from samples every ``gap`` along them (a segment within
+    # ``gap`` of a point has a sample within 1.5 ``gap``), then the exact distance
+    n = np.maximum(np.ceil(np.sqrt(L2) / gap).astype(np.int64), 1)
+    owner = np.repeat(np.arange(len(seg)), n + 1)
+    frac = np.concatenate([np.linspace(0.0, 1.0, k + 1) for k in n])
+    samples = a[owner] + frac[:, None] * d[owner]
+    hits = cKDTree(samples).query_ball_point(g, 1.5 * gap)
+    lens = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
+    if lens.sum() == 0:
+        return g
+    pi = np.repeat(np.arange(len(g)), lens)
+    si = owner[np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])]
+    t = np.clip(np.einsum("ij,ij->i", g[pi] - a[si], d[si]) / L2[si], 0.0, 1.0)
+    dist = np.linalg.norm(a[si] + t[:, None] * d[si] - g[pi], axis=1)
+    close = np.zeros(len(g), dtype=bool)
+    close[pi[dist <= gap]] = True
+    return g[~close]
 
 
 def _residual_spline(ctx: Ctx, ring: np.ndarray, fnet: Network, centre: np.ndarray,

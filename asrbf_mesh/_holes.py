@@ -32,6 +32,7 @@ network over them.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from dataclasses import dataclass, field
@@ -180,6 +181,100 @@ def _as_scan(scan: Any) -> Scan:
     return Scan(check_points(scan, "scan"))
 
 
+def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
+                 rims: list[set[int]], scan_points: np.ndarray, R: np.ndarray,
+                 spacing: float, limit: float | None,
+                 diag: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Fill the enclosed boundary loops the view-plane fills left open (in their own plane).
+
+    Updates ``infos`` in place: a hole whose rim the loop shares becomes filled; a loop
+    no view-plane hole covered (its region ran into the outside in the projection) is
+    added as a new hole. A fill that would reuse an edge the mesh already has (a chord
+    between two rim vertices that are neighbours across the surface) is refused: the
+    mesh stays manifold. Returns the vertices, the faces and the outer-border edges.
+    """
+    from ._hole_loops import fill_loop, open_loops
+
+    loops = open_loops(faces, len(vertices))
+    tree = cKDTree(scan_points)
+    all_e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
+                    axis=1)
+    known = set(map(tuple, all_e.tolist()))
+    uniq, count = np.unique(all_e, axis=0, return_counts=True)
+    boundary = set(map(tuple, uniq[count == 1].tolist()))
+    new_v: list[np.ndarray] = [vertices]
+    new_f: list[np.ndarray] = [faces]
+    n = len(vertices)
+    for loop in loops:
+        if len(loop) < 3:  # a pinched boundary vertex, not a hole
+            continue
+        rim_edges = map(tuple, np.sort(np.column_stack([loop, np.roll(loop, -1)]),
+                                       axis=1).tolist())
+        if not all(e in boundary for e in rim_edges):  # libigl's walk around a pinch
+            continue
+        local = vertices[loop] @ R
+        size = float(np.linalg.norm(np.ptp(local[:, :2], axis=0)))
+        owner = [i for i, r in enumerate(rims) if r.intersection(loop.tolist())]
+        if limit is not None and size > limit:
+            if not owner:
+                infos.append(HoleInfo(len(infos), size, 100.0 * size / diag,
+                                      tuple(float(x) for x in vertices[loop].mean(axis=0)),
+                                      len(loop), False,
+                                      f"larger than max_hole_size ({size:.4g} > {limit:.4g} "
+                                      "scan units)"))
+            continue
+        v, t, reason = fill_loop(loop, vertices, faces, spacing, scan_points, tree)
+        if len(t) and _reuses(t, loop, known):  # the disk fill makes fewer chords
+            v, t, reason = fill_loop(loop, vertices, faces, spacing, scan_points, tree,
+                                     disk=True)
+            if len(t) and _reuses(t, loop, known):
+                v, t = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+                reason = "the fill would reuse an edge of the mesh (the rim touches itself)"
+        if len(t) == 0:
+            if not owner:
+                infos.append(HoleInfo(len(infos), size, 100.0 * size / diag,
+                                      tuple(float(x) for x in vertices[loop].mean(axis=0)),
+                                      len(loop), False, reason))
+            continue
+        t = np.where(t < 0, n - t - 1, t)
+        new_v.append(v)
+        new_f.append(t)
+        known |= set(map(tuple, np.sort(np.concatenate(
+            [t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1).tolist()))
+        n += len(v)
+        if owner:
+            for i in owner:
+                h = infos[i]
+                infos[i] = dataclasses.replace(
+                    h, filled=True, reason=None, vertices_added=h.vertices_added + len(v),
+                    faces_added=h.faces_added + len(t))
+        else:
+            infos.append(HoleInfo(len(infos), size, 100.0 * size / diag,
+                                  tuple(float(x) for x in vertices[loop].mean(axis=0)),
+                                  len(loop), True, None, len(v), len(t)))
+            rims.append(set(loop.tolist()))
+    faces = np.vstack(new_f)
+    border = sum(len(loop) for loop in _outer_loops(faces, n))
+    return np.vstack(new_v), faces, border
+
+
+def _reuses(tris: np.ndarray, loop: np.ndarray, known: set[tuple[int, int]]) -> bool:
+    """Whether a loop's fill joins two mesh vertices the mesh already joins (not a rim edge)."""
+    rim_edges = set(map(tuple, np.sort(np.column_stack([loop, np.roll(loop, -1)]),
+                                       axis=1).tolist()))
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    chords = {x for x in map(tuple, e[(e >= 0).all(axis=1)].tolist()) if x not in rim_edges}
+    return bool(chords & known)
+
+
+def _outer_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
+    """Return the longest boundary loop of each connected part: the outer borders."""
+    from ._hole_loops import boundary_cycles, open_loops
+
+    inner = {tuple(lp.tolist()) for lp in open_loops(faces, n_vertices)}
+    return [lp for lp in boundary_cycles(faces) if tuple(lp.tolist()) not in inner]
+
+
 def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
                max_hole_size: str | float | None = None, blend: str = "thin-plate",
                lowpass_rel: float | None = 1.0, seed: int = 0,
@@ -270,6 +365,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     new_pts: list[np.ndarray] = []
     new_tris: list[np.ndarray] = []
     infos: list[HoleInfo] = []
+    rims: list[set[int]] = []
     n_base = len(scan.points)
     n_new = 0
     for i, h in enumerate(holes):
@@ -278,6 +374,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         size_pct = 100.0 * h.size / diag
         base = {"index": i, "size_abs": h.size, "size_pct": size_pct, "centre": centre,
                 "rim_vertices": int(len(rim))}
+        rims.append(set(rim.tolist()))
         if limit is not None and h.size > limit:
             infos.append(HoleInfo(**base, filled=False,
                                   reason=f"larger than max_hole_size ({h.size:.4g} > "
@@ -298,6 +395,8 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     add_local = np.vstack(new_pts) if new_pts else np.zeros((0, 3))
     vertices = np.vstack([scan.points, add_local @ R.T])
     all_faces = np.vstack([faces, *new_tris]) if new_tris else faces
-    quality = np.r_[np.zeros(n_base), np.ones(len(add_local))]
+    vertices, all_faces, border = _close_loops(vertices, all_faces, infos, rims,
+                                               scan.points, R, spacing, limit, diag)
+    quality = np.r_[np.zeros(n_base), np.ones(len(vertices) - n_base)]
     mesh = Mesh(vertices, all_faces, vertex_quality=quality)
     return FillResult(mesh, tuple(infos), border, time.perf_counter() - t0, net)

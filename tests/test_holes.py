@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -231,12 +232,18 @@ def test_cli_max_hole_size_inf_says_what_a_length_is(tmp_path, capsys) -> None:
 def test_face_map_natural_holes_filled_border_kept() -> None:
     scan = am.load_scan(am.face_map_path())
     res = fill_holes(scan, seed=0, progress=False)
-    assert res.holes_found >= 15 and res.holes_filled == res.holes_found
+    # every hole is filled but where a fill would join two rim vertices the surface
+    # already joins (it would make an edge with three faces)
+    refused = [h for h in res.holes if not h.filled]
+    assert res.holes_found >= 15 and len(refused) <= 1
+    assert all("reuse an edge" in h.reason for h in refused)
     border = max(boundary_loops(scan.faces), key=len)  # the scan's outer border
     after = boundary_loops(res.mesh.faces)
     assert any(set(lp.tolist()) == set(border.tolist()) for lp in after)
     _, counts = edges_count(res.mesh.faces)
-    assert counts.max() == 2 and int((counts == 1).sum()) == res.border_edges
+    open_edges = sum(h.rim_vertices for h in refused)
+    assert counts.max() == 2
+    assert int((counts == 1).sum()) == res.border_edges + open_edges
 
 
 def folded_scan() -> tuple[am.Scan, np.ndarray]:
@@ -305,3 +312,42 @@ def test_point_location_takes_the_one_column_candidates_a_kdtree_gives_for_k_1()
         hk.inside_any(pts, xy, np.array([[0, 1, 3]]), cand)
     with pytest.raises(ValueError, match="indexes a point that does not exist"):
         hk.coverage(xy, np.array([[0, 1, -1]]), np.zeros(2), 0.1, 10, 10)
+
+
+def cylinder_scan(hole: bool = True) -> tuple[am.Scan, np.ndarray]:
+    """Three quarters of a cylinder (radius 10, axis y) seen along z, with a hole on its
+    steep side: the rim folds over itself in the view plane."""
+    th, y = np.meshgrid(np.linspace(-0.75 * np.pi, 0.75 * np.pi, 60), np.linspace(0, 30, 40))
+    pts = np.c_[10 * np.sin(th).ravel(), y.ravel(), 10 * np.cos(th).ravel()]
+    nx, ny = 60, 40
+    j, i = np.mgrid[0:ny - 1, 0:nx - 1]
+    v = (j * nx + i).ravel()
+    faces = np.r_[np.c_[v, v + 1, v + nx + 1], np.c_[v, v + nx + 1, v + nx]]
+    centre = np.array([10 * np.sin(0.55 * np.pi), 15.0, 10 * np.cos(0.55 * np.pi)])
+    inside = np.linalg.norm(pts - centre, axis=1) < 4.0 if hole else np.zeros(len(pts), bool)
+    keep = np.flatnonzero(~inside)
+    remap = np.full(len(pts), -1)
+    remap[keep] = np.arange(len(keep))
+    f = remap[faces]
+    return am.Scan(pts[keep], f[(f >= 0).all(axis=1)]), pts[inside]
+
+
+def test_a_hole_whose_rim_folds_in_the_view_plane_is_closed_in_3d() -> None:
+    from asrbf_mesh._hole_loops import boundary_cycles
+
+    holed, truth = cylinder_scan()
+    assert len(truth) > 20
+    cycles = boundary_cycles(holed.faces)
+    assert len(cycles) == 2  # the outer border and the hole
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(holed, seed=0, progress=False)
+    assert any(h.filled for h in res.holes)
+    _, counts = edges_count(res.mesh.faces)
+    assert counts.max() == 2
+    loops = boundary_loops(res.mesh.faces)
+    assert len(loops) == 1  # only the outer border stays open
+    new = res.mesh.vertices[res.mesh.vertex_quality > 0]
+    radius = np.linalg.norm(new[:, [0, 2]], axis=1)
+    assert np.abs(radius - 10).max() < 0.6  # on the cylinder, within 6 % of its radius
+    assert point_mesh_distance(truth, res.mesh).max() < 0.6
