@@ -1,0 +1,66 @@
+"""A short crash campaign of hole filling (the long one: scripts/bench_holes_protocol.py).
+
+Every case runs in a child process, so a crash of a native library (SIGSEGV, abort) fails
+the test with its exit code instead of killing the test run.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+CHILD = textwrap.dedent("""
+    import json, sys, warnings
+    import numpy as np
+    import asrbf_mesh as am
+    from asrbf_mesh.evaluate._punch_protocol import punch_protocol, score_holes
+    warnings.simplefilter("ignore")
+    kind, seed = sys.argv[1], int(sys.argv[2])
+    if kind == "face":
+        p = punch_protocol(am.load_scan(am.face_map_path()), seed)
+        scan = p.scan
+    else:
+        rng = np.random.default_rng(seed)
+        n = 40
+        x, y = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+        if kind == "cliff":
+            z = np.where(x > n / 2 + 3 * np.sin(y / 5), 12.0, 0.0) + 0.3 * np.sin(x / 4)
+        elif kind == "spiral":
+            r, th = np.hypot(x - n / 2, y - n / 2), np.arctan2(y - n / 2, x - n / 2)
+            z = 6.0 * np.mod(th + r / 4, 2 * np.pi)
+        else:  # nested: a plateau with a ring-shaped hole around an island
+            z = 0.05 * x * y
+        pts = np.c_[x.ravel(), y.ravel(), z.ravel()]
+        j, i = np.mgrid[0:n - 1, 0:n - 1]
+        v = (j * n + i).ravel()
+        faces = np.r_[np.c_[v, v + 1, v + n + 1], np.c_[v, v + n + 1, v + n]]
+        d = np.hypot(x - n / 2, y - n / 2).ravel()
+        drop = (d < 8) & (d > 4) if kind == "nested" else d < 6 + 2 * rng.random()
+        keep = np.flatnonzero(~drop)
+        remap = np.full(len(pts), -1)
+        remap[keep] = np.arange(len(keep))
+        f = remap[faces]
+        scan = am.Scan(pts[keep], f[(f >= 0).all(axis=1)])
+    res = am.fill_holes(scan, seed=seed, progress=False)
+    print(json.dumps({"found": res.holes_found, "filled": res.holes_filled,
+                      "reasons": [h.reason for h in res.holes if not h.filled],
+                      "finite": bool(np.isfinite(res.mesh.vertices).all())}))
+""")
+
+
+@pytest.mark.parametrize("kind, seed", [("face", 0), ("face", 6), ("cliff", 0), ("cliff", 1),
+                                        ("spiral", 0), ("nested", 0)])
+def test_fill_holes_never_crashes_and_reports_every_hole(kind: str, seed: int) -> None:
+    proc = subprocess.run([sys.executable, "-c", CHILD, kind, str(seed)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr[-2000:]}"
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["finite"]
+    assert out["found"] >= 1
+    # every hole is filled or reported with its reason
+    assert len(out["reasons"]) == out["found"] - out["filled"]
+    assert all(isinstance(r, str) and r for r in out["reasons"])
