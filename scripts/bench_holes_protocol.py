@@ -135,8 +135,11 @@ def main(argv: list[str] | None = None) -> int:
     crashes = [b for b in bad if b[2].startswith("CRASH")]
     holes = sum(r["holes"] for r in done)
     opened = [(r["name"], r["seed"], why) for r in done for why in r["open"]]
+    flags = " --poisson" * args.poisson + " --fuzz" * args.fuzz + (
+        f" --pieces {args.pieces}" if args.pieces != "auto" else "")
     head = (f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; `python "
-            f"scripts/bench_holes_protocol.py {' '.join(sys.argv[1:])}` ({took:.0f} s)._\n\n")
+            f"scripts/bench_holes_protocol.py --seeds {_seeds(args.seeds)}{flags}` "
+            f"({took:.0f} s)._\n\n")
     lines = [f"- cases: {len(done) + len(bad):,} ({len(names)} scans × {len(args.seeds)} seeds); "
              f"crashes: {len(crashes)}; cases that raised: {len(bad) - len(crashes)}",
              f"- enclosed holes: {holes:,}; left open: {len(opened)}"]
@@ -160,11 +163,18 @@ def main(argv: list[str] | None = None) -> int:
         headers += ["Poisson pooled RMS %", "Poisson median %", "Poisson worst %",
                     "Poisson > 0.5 %", "ours lower than Poisson", "Poisson s"]
     body = ("## Hole filling on the punch protocol (issue 15): seeds "
-            f"{', '.join(map(str, args.seeds))}, --pieces {args.pieces}\n\n" + head
+            f"{_seeds(args.seeds)}, --pieces {args.pieces}\n\n" + head
             + "\n".join(lines) + "\n\n" + table(headers, rows))
     print(body)
     write_section(f"holes-protocol-{args.pieces}", body)
     return 1 if crashes else 0
+
+
+def _seeds(seeds: list[int]) -> str:
+    """``0 1 2 3`` or ``$(seq 4 203)`` for a run of consecutive seeds."""
+    if len(seeds) > 4 and seeds == list(range(seeds[0], seeds[-1] + 1)):
+        return f"$(seq {seeds[0]} {seeds[-1]})"
+    return " ".join(map(str, seeds))
 
 
 def _row(name: str, rs: list[dict], poisson: bool) -> list:
