@@ -79,21 +79,25 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """
     out = Path(path)
     parent = out.parent if str(out.parent) else Path(".")
+    tmp_path: Path | None = None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=f".tmp{out.suffix}", dir=parent)
-    except OSError as exc:
-        raise AsrbfError(f"{out}: cannot write in {parent} ({exc.strerror})") from None
-    os.close(fd)
-    tmp_path = Path(tmp)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp creates 0600; outputs get normal permissions
-    try:
+        with _signals_held():  # no interrupt between creating the file and arming cleanup
+            try:
+                fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=f".tmp{out.suffix}",
+                                           dir=parent)
+            except OSError as exc:
+                raise AsrbfError(f"{out}: cannot write in {parent} ({exc.strerror})") from None
+            os.close(fd)
+            tmp_path = Path(tmp)
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; outputs get normal rights
         yield tmp_path
         os.replace(tmp_path, out)
     except BaseException:
-        with contextlib.suppress(OSError):
-            tmp_path.unlink()
+        if tmp_path is not None:
+            with contextlib.suppress(OSError):
+                tmp_path.unlink()
         raise
 
 
@@ -195,20 +199,24 @@ def atomic_dir(path: str | os.PathLike, owns: Sequence[str] = ()) -> Iterator[Pa
         raise AsrbfError(f"{out}: output path exists and is not a folder")
     parent = out.parent if str(out.parent) else Path(".")
     created = _make_parents(parent)
+    tmp: Path | None = None
     try:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=parent))
-    except OSError as exc:
-        _remove_empty(created)
-        raise AsrbfError(f"{out}: cannot write in {parent} ({exc.strerror})") from None
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp creates 0700; outputs get normal permissions
-    try:
+        # an interrupt between creating the folder and entering this block would leave
+        # it behind: signals wait until the folder is created and its cleanup armed
+        with _signals_held():
+            try:
+                tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=parent))
+            except OSError as exc:
+                raise AsrbfError(f"{out}: cannot write in {parent} ({exc.strerror})") from None
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; outputs get normal rights
         yield tmp
         with _signals_held():
             _install(tmp, out, owns)
     except BaseException:
         with _signals_held():
-            shutil.rmtree(tmp, ignore_errors=True)
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
             _remove_empty(created)
         raise
