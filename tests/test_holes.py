@@ -351,3 +351,32 @@ def test_a_hole_whose_rim_folds_in_the_view_plane_is_closed_in_3d() -> None:
     radius = np.linalg.norm(new[:, [0, 2]], axis=1)
     assert np.abs(radius - 10).max() < 0.6  # on the cylinder, within 6 % of its radius
     assert point_mesh_distance(truth, res.mesh).max() < 0.6
+
+
+def test_a_fragment_keeps_its_border_open_while_the_hole_beside_it_is_closed() -> None:
+    """Each connected part's longest boundary loop is its outer border: never capped."""
+    x, y = np.meshgrid(np.arange(30.0), np.arange(30.0))
+    pts = np.c_[x.ravel(), y.ravel(), 0.02 * (x * y).ravel()]
+    n = 30
+    j, i = np.mgrid[0:n - 1, 0:n - 1]
+    v = (j * n + i).ravel()
+    faces = np.r_[np.c_[v, v + 1, v + n + 1], np.c_[v, v + n + 1, v + n]]
+    hole = np.hypot(x - 15, y - 15).ravel() < 4
+    keep = np.flatnonzero(~hole)
+    remap = np.full(len(pts), -1)
+    remap[keep] = np.arange(len(keep))
+    f = remap[faces]
+    f = f[(f >= 0).all(axis=1)]
+    # a 4 x 4 fragment floating 50 above and beside the grid
+    fx, fy = np.meshgrid(np.arange(4.0) + 40, np.arange(4.0) + 5)
+    frag = np.c_[fx.ravel(), fy.ravel(), np.full(16, 50.0)]
+    fv = (np.mgrid[0:3, 0:3][0] * 4 + np.mgrid[0:3, 0:3][1]).ravel()
+    ffaces = np.r_[np.c_[fv, fv + 1, fv + 5], np.c_[fv, fv + 5, fv + 4]] + len(keep)
+    scan = am.Scan(np.vstack([pts[keep], frag]), np.vstack([f, ffaces]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(scan, seed=0, progress=False)
+    new = res.mesh.vertices[res.mesh.vertex_quality > 0]
+    assert len(new) and np.all(new[:, 2] < 49)  # nothing added on the fragment
+    loops = boundary_loops(res.mesh.faces)
+    assert sorted(len(lp) for lp in loops) == [12, 4 * (n - 1)]  # the two outer borders
