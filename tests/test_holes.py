@@ -380,3 +380,26 @@ def test_a_fragment_keeps_its_border_open_while_the_hole_beside_it_is_closed() -
     assert len(new) and np.all(new[:, 2] < 49)  # nothing added on the fragment
     loops = boundary_loops(res.mesh.faces)
     assert sorted(len(lp) for lp in loops) == [12, 4 * (n - 1)]  # the two outer borders
+
+
+@pytest.mark.parametrize("make", ["cylinder", "face_seed_6"])
+def test_fills_do_not_intersect_the_scan_or_themselves(make: str) -> None:
+    """pymeshlab's self-intersection selection finds no face of the fill."""
+    import pymeshlab
+
+    if make == "cylinder":
+        holed, _ = cylinder_scan()
+    else:
+        from asrbf_mesh.evaluate._punch_protocol import punch_protocol
+
+        holed = punch_protocol(am.load_scan(am.face_map_path()), 6).scan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(holed, seed=0, progress=False)
+    n_scan_faces = len(holed.faces)
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=res.mesh.vertices, face_matrix=res.mesh.faces))
+    ms.compute_selection_by_self_intersections_per_face()
+    selected = np.flatnonzero(ms.current_mesh().face_selection_array())
+    new_bad = selected[selected >= n_scan_faces]
+    assert len(new_bad) == 0, f"{len(new_bad)} fill faces intersect"
