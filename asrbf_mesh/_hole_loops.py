@@ -127,7 +127,7 @@ def segments_cross(q: np.ndarray) -> bool:
     return False
 
 
-def fill_loop(loop: np.ndarray, points: np.ndarray, faces: np.ndarray, spacing: float,
+def fill_loop(loop: np.ndarray, points: np.ndarray, spacing: float,
               scan_points: np.ndarray, scan_tree: cKDTree, *, disk: bool = False
               ) -> tuple[np.ndarray, np.ndarray, str | None]:
     """Fill one boundary loop in its rim's best-fit plane.
@@ -135,11 +135,10 @@ def fill_loop(loop: np.ndarray, points: np.ndarray, faces: np.ndarray, spacing: 
     Parameters
     ----------
     loop : (n,) int array
-        The loop's vertex indices, in order.
+        The loop's vertex indices in its faces' direction, as :func:`boundary_cycles`
+        walks it (the mesh runs ``loop[0] -> loop[1]``; the fill runs the other way).
     points : (V, 3) array
         The mesh's vertices (world units).
-    faces : (F, 3) int array
-        The mesh's triangles (to orient the fill like its neighbours).
     spacing : float
         Sampling spacing (world units): interior vertices are this far apart.
     scan_points, scan_tree : (N, 3) array and its cKDTree
@@ -166,7 +165,7 @@ def fill_loop(loop: np.ndarray, points: np.ndarray, faces: np.ndarray, spacing: 
     if np.unique(np.round(q / max(spacing, 1e-300), 6), axis=0).shape[0] < len(q):
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64), "rim points coincide in its plane"
     if disk or segments_cross(q):
-        return _fill_by_disk(loop, rim, faces)
+        return _fill_by_disk(loop, rim)
     n = len(q)
     seg = np.column_stack([np.arange(n), np.roll(np.arange(n), -1)])
     tris, extra = triangulate(q, seg, "pYQ")
@@ -187,10 +186,10 @@ def fill_loop(loop: np.ndarray, points: np.ndarray, faces: np.ndarray, spacing: 
     new = centre + g @ axes + heights[:, None] * normal
     ids = np.concatenate([loop, -1 - np.arange(len(g))])
     out = ids[tris]
-    return new, _oriented(out, loop, faces), None
+    return new, _oriented(out, loop), None
 
 
-def _fill_by_disk(loop: np.ndarray, rim: np.ndarray, faces: np.ndarray
+def _fill_by_disk(loop: np.ndarray, rim: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, str | None]:
     """Fill a loop through a disk: rim on a circle by arc length, interior by fairing."""
     from ._igl import k_harmonic
@@ -235,7 +234,7 @@ def _fill_by_disk(loop: np.ndarray, rim: np.ndarray, faces: np.ndarray
     else:
         new = np.zeros((0, 3))
     ids = np.concatenate([loop, -1 - np.arange(len(g))])
-    return new, _oriented(ids[tris], loop, faces), None
+    return new, _oriented(ids[tris], loop), None
 
 
 def _heights(g: np.ndarray, centre: np.ndarray, axes: np.ndarray, normal: np.ndarray,
@@ -261,11 +260,8 @@ def _heights(g: np.ndarray, centre: np.ndarray, axes: np.ndarray, normal: np.nda
         return np.zeros(len(g))
 
 
-def _oriented(tris: np.ndarray, loop: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Flip the fill so that it traverses each rim edge opposite to the mesh's own face."""
+def _oriented(tris: np.ndarray, loop: np.ndarray) -> np.ndarray:
+    """Flip the fill so that it runs each rim edge against the mesh (``loop[1] -> loop[0]``)."""
     a, b = int(loop[0]), int(loop[1])
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    forward = bool(np.any((e[:, 0] == a) & (e[:, 1] == b)))  # the mesh runs a -> b
     f = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    ours_forward = bool(np.any((f[:, 0] == a) & (f[:, 1] == b)))
-    return tris[:, [0, 2, 1]] if ours_forward == forward else tris
+    return tris[:, [0, 2, 1]] if bool(np.any((f[:, 0] == a) & (f[:, 1] == b))) else tris

@@ -181,6 +181,9 @@ def _as_scan(scan: Any) -> Scan:
     return Scan(check_points(scan, "scan"))
 
 
+_KEY = np.int64(2) ** 31  # edge key base: vertex indices stay below 2**31
+
+
 def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                  rims: list[set[int]], scan_points: np.ndarray, R: np.ndarray,
                  spacing: float, limit: float | None,
@@ -197,20 +200,16 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
 
     loops = open_loops(faces, len(vertices))
     tree = cKDTree(scan_points)
-    all_e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
-                    axis=1)
-    known = set(map(tuple, all_e.tolist()))
-    uniq, count = np.unique(all_e, axis=0, return_counts=True)
-    boundary = set(map(tuple, uniq[count == 1].tolist()))
+    keys, count = np.unique(_edge_keys(faces), return_counts=True)
+    known = keys  # every edge of the mesh and of the fills added so far
+    boundary = keys[count == 1]
     new_v: list[np.ndarray] = [vertices]
     new_f: list[np.ndarray] = [faces]
     n = len(vertices)
     for loop in loops:
         if len(loop) < 3:  # a pinched boundary vertex, not a hole
             continue
-        rim_edges = map(tuple, np.sort(np.column_stack([loop, np.roll(loop, -1)]),
-                                       axis=1).tolist())
-        if not all(e in boundary for e in rim_edges):  # libigl's walk around a pinch
+        if not np.isin(_rim_keys(loop), boundary).all():  # not a cycle of boundary edges
             continue
         local = vertices[loop] @ R
         size = float(np.linalg.norm(np.ptp(local[:, :2], axis=0)))
@@ -223,10 +222,9 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                                       f"larger than max_hole_size ({size:.4g} > {limit:.4g} "
                                       "scan units)"))
             continue
-        v, t, reason = fill_loop(loop, vertices, faces, spacing, scan_points, tree)
+        v, t, reason = fill_loop(loop, vertices, spacing, scan_points, tree)
         if len(t) and _reuses(t, loop, known):  # the disk fill makes fewer chords
-            v, t, reason = fill_loop(loop, vertices, faces, spacing, scan_points, tree,
-                                     disk=True)
+            v, t, reason = fill_loop(loop, vertices, spacing, scan_points, tree, disk=True)
             if len(t) and _reuses(t, loop, known):
                 v, t = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
                 reason = "the fill would reuse an edge of the mesh (the rim touches itself)"
@@ -239,8 +237,7 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
         t = np.where(t < 0, n - t - 1, t)
         new_v.append(v)
         new_f.append(t)
-        known |= set(map(tuple, np.sort(np.concatenate(
-            [t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1).tolist()))
+        known = np.union1d(known, _edge_keys(t))
         n += len(v)
         if owner:
             for i in owner:
@@ -258,13 +255,24 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
     return np.vstack(new_v), faces, border
 
 
-def _reuses(tris: np.ndarray, loop: np.ndarray, known: set[tuple[int, int]]) -> bool:
-    """Whether a loop's fill joins two mesh vertices the mesh already joins (not a rim edge)."""
-    rim_edges = set(map(tuple, np.sort(np.column_stack([loop, np.roll(loop, -1)]),
-                                       axis=1).tolist()))
+def _edge_keys(tris: np.ndarray) -> np.ndarray:
+    """One int64 key per (undirected) edge of each triangle: ``min * 2**31 + max``."""
     e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-    chords = {x for x in map(tuple, e[(e >= 0).all(axis=1)].tolist()) if x not in rim_edges}
-    return bool(chords & known)
+    return e[:, 0].astype(np.int64) * _KEY + e[:, 1]
+
+
+def _rim_keys(loop: np.ndarray) -> np.ndarray:
+    """Keys of a loop's rim edges."""
+    e = np.sort(np.column_stack([loop, np.roll(loop, -1)]), axis=1)
+    return e[:, 0].astype(np.int64) * _KEY + e[:, 1]
+
+
+def _reuses(tris: np.ndarray, loop: np.ndarray, known: np.ndarray) -> bool:
+    """Whether a loop's fill joins two mesh vertices the mesh already joins (not a rim edge)."""
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    e = e[e[:, 0] >= 0]  # both ends mesh vertices (new vertices are negative)
+    chords = np.setdiff1d(e[:, 0].astype(np.int64) * _KEY + e[:, 1], _rim_keys(loop))
+    return bool(np.isin(chords, known).any())
 
 
 def _outer_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
