@@ -37,7 +37,7 @@ PACKAGES = ("asrbf_mesh", "meshlab_filter")
 #: Front ends of the package: everything else in asrbf_mesh/ outside evaluate/ is core.
 FRONT_ENDS = ("asrbf_mesh.cli", "asrbf_mesh.tasks", "asrbf_mesh._batch")
 #: Heavy or optional libraries that ``import asrbf_mesh`` must not load.
-HEAVY = ("pymeshlab", "matplotlib", "dask", "distributed")
+HEAVY = ("pymeshlab", "matplotlib", "dask", "distributed", "laspy", "tifffile", "PIL")
 #: Each native library and the only modules allowed to import it.
 ADAPTERS = {
     "pymeshlab": ("asrbf_mesh.evaluate._meshlab", "meshlab_filter"),
@@ -46,6 +46,8 @@ ADAPTERS = {
     "igl": ("asrbf_mesh._igl",),
     "dask": ("asrbf_mesh._batch",),
     "distributed": ("asrbf_mesh._batch",),
+    "laspy": ("asrbf_mesh._lidar",),
+    "tifffile": ("asrbf_mesh._range",),
 }
 MAX_LINES = 800
 
