@@ -35,8 +35,8 @@ def boundary_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e[once], third[once]
 
 
-def find_holes(xy: np.ndarray, faces: np.ndarray,
-               spacing: float) -> tuple[list[Hole], int, Footprint]:
+def find_holes(xy: np.ndarray, faces: np.ndarray, spacing: float, *,
+               bay_mouth: float | None = None) -> tuple[list[Hole], int, Footprint]:
     """Holes of a triangulated height field and the count of outer-border edges.
 
     Parameters
@@ -47,6 +47,9 @@ def find_holes(xy: np.ndarray, faces: np.ndarray,
         The scan's triangles.
     spacing : float
         Sampling spacing (physical units).
+    bay_mouth : float, optional
+        Bays of the outside behind mouths narrower than this are holes too
+        (:meth:`~asrbf_mesh._footprint.Footprint.of`).
 
     Returns
     -------
@@ -55,7 +58,7 @@ def find_holes(xy: np.ndarray, faces: np.ndarray,
     border_edges : int
     footprint : Footprint
     """
-    fp = Footprint.of(xy, faces, spacing)
+    fp = Footprint.of(xy, faces, spacing, bay_mouth=bay_mouth)
     cell = fp.cell
     edges, third = boundary_edges(faces)
     a, b, c = xy[edges[:, 0]], xy[edges[:, 1]], xy[third]

@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 from . import _holes_kernels as _hk
 from ._hole_patch import away_from, grid_samples, triangulate
 
-__all__ = ["open_loops", "boundary_cycles", "fill_loop", "segments_cross"]
+__all__ = ["open_loops", "outer_loops", "boundary_cycles", "fill_loop", "segments_cross"]
 
 
 def boundary_cycles(faces: np.ndarray) -> list[np.ndarray]:
@@ -125,6 +125,12 @@ def segments_cross(q: np.ndarray) -> bool:
         if col.any():
             return True
     return False
+
+
+def outer_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
+    """Return the longest boundary cycle of each connected part: the outer borders."""
+    inner = {tuple(lp.tolist()) for lp in open_loops(faces, n_vertices)}
+    return [lp for lp in boundary_cycles(faces) if tuple(lp.tolist()) not in inner]
 
 
 def fill_loop(loop: np.ndarray, points: np.ndarray, spacing: float,
@@ -245,7 +251,7 @@ def _heights(g: np.ndarray, centre: np.ndarray, axes: np.ndarray, normal: np.nda
         return np.zeros(0)
     size = float(np.linalg.norm(np.ptp(rim, axis=0)))
     reach = max(6.0 * spacing, 0.25 * size)
-    near = np.unique(np.concatenate(scan_tree.query_ball_point(rim, reach)))
+    near = np.unique(np.concatenate(scan_tree.query_ball_point(rim, reach))).astype(np.int64)
     data = scan_points[near] if len(near) >= 3 else rim
     uv = (data - centre) @ axes.T
     h = (data - centre) @ normal

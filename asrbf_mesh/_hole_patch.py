@@ -260,12 +260,14 @@ def fill_single(hole: Hole, ctx: Ctx) -> Patch:
         g = g[dist > 0.6 * ctx.spacing]
     pts = np.vstack([rim_xy, g])
     constraints = seg
+    # a bay's rim is open (its mouth): no closed polygon to triangulate
+    closed = bool(np.all(np.bincount(seg.ravel(), minlength=len(rim)) % 2 == 0))
     try:
         for _ in range(5):
             # with an open rim, triangle's hole eating would empty the whole polygon: keep
             # the convex hull ("c") and let the coverage filters below remove the outside
-            tris, extra = triangulate(pts, constraints,
-                                       "pYQ" if len(constraints) == len(seg) else "pcYQ")
+            tris, extra = triangulate(pts, constraints, "pYQ" if closed and len(
+                constraints) == len(seg) else "pcYQ")
             if len(extra) == 0:
                 break
             # the rim crosses itself in the view plane: drop the crossing rim edges from the

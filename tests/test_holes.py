@@ -403,3 +403,47 @@ def test_fills_do_not_intersect_the_scan_or_themselves(make: str) -> None:
     selected = np.flatnonzero(ms.current_mesh().face_selection_array())
     new_bad = selected[selected >= n_scan_faces]
     assert len(new_bad) == 0, f"{len(new_bad)} fill faces intersect"
+
+
+def test_a_hole_punched_into_a_narrow_gap_is_filled_up_to_the_gap() -> None:
+    """A bay (a disk behind a mouth narrower than BAY_MOUTH spacings) is filled; the gap is not."""
+    scan = grid_scan(franke, nx=70, ny=70, size=(70.0, 70.0))
+    xy = scan.points[:, :2]
+    column = np.arange(len(xy)) % 70
+    gap = (column == 35) & (xy[:, 1] > 30.0)  # one column of samples: a 2-wide gap to the top
+    disk = np.hypot(xy[:, 0] - 35.0, xy[:, 1] - 25.0) < 9.0
+    keep = np.flatnonzero(~(gap | disk))
+    remap = np.full(len(xy), -1)
+    remap[keep] = np.arange(len(keep))
+    f = remap[scan.faces]
+    holed = am.Scan(scan.points[keep], f[(f >= 0).all(1)])
+    res = fill_holes(holed, seed=0, progress=False)
+    new = res.mesh.vertices[res.mesh.vertex_quality > 0]
+    assert len(new) > 100 and res.holes_filled >= 1
+    assert np.hypot(*(new[:, :2] - [35.0, 25.0]).T).min() < 1.0  # the disk is filled ...
+    assert new[:, 1].max() < 40.0  # ... the gap beyond it is not
+    truth = franke(new[:, 0], new[:, 1])
+    assert np.sqrt(np.mean((new[:, 2] - truth) ** 2)) < 0.05 * np.ptp(scan.points[:, 2])
+    # with bays only behind mouths narrower than a spacing, the disk is outside: no fill
+    import asrbf_mesh._holes as holes_mod
+
+    old = holes_mod.BAY_MOUTH
+    try:
+        holes_mod.BAY_MOUTH = 0.5
+        assert fill_holes(holed, res.network, progress=False).faces_added == 0
+    finally:
+        holes_mod.BAY_MOUTH = old
+
+
+def test_the_protocol_tells_notches_by_the_traced_borders_on_request() -> None:
+    """libigl cuts the face map's border at pinch vertices: a notch then counts as enclosed."""
+    from asrbf_mesh.evaluate._punch_protocol import punch_protocol
+
+    scan = am.load_scan(am.face_map_path())
+    igl_ = punch_protocol(scan, 0)
+    traced = punch_protocol(scan, 0, border="traced")
+    parts = punch_protocol(scan, 0, border="parts")
+    assert np.array_equal(igl_.truth, traced.truth)
+    assert traced.n_enclosed < igl_.n_enclosed
+    assert not np.any(traced.enclosed & ~igl_.enclosed)
+    assert not np.any(parts.enclosed & ~traced.enclosed)
