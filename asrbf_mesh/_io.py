@@ -16,14 +16,15 @@ from __future__ import annotations
 import importlib.util
 import os
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ._atomic import atomic_path, check_output_path
 from ._mesh import Mesh, Scan, collinear_xy
-from ._readers import FORMAT_NAMES, READERS, SUPPORTED_SCAN_FORMATS
+from ._readers import FORMAT_NAMES, READERS, SUPPORTED_SCAN_FORMATS, check_scan_path
 from ._validate import check_int, one_line, plural
 from ._writers import SUPPORTED_MESH_FORMATS, WRITERS
 from .errors import ScanError
@@ -41,39 +42,9 @@ __all__ = [
 _FACE_MAP_PARTS = ("tests", "sample_meshes", "rangemaps", "face000.ply")
 
 
-def check_scan_path(path: str | os.PathLike[str], formats: Sequence[str],
-                    unknown: str) -> tuple[Path, str]:
-    """Check that ``path`` is a non-empty file with one of ``formats``; return it and its name.
-
-    ``unknown`` words the format error, with ``{shown}`` standing for the extension.
-
-    Raises
-    ------
-    ScanError
-        One line starting with the path: missing, a directory, another format, empty or
-        unreadable.
-    """
-    p = Path(path)
-    name = os.fsdecode(path)
-    if not p.exists():
-        raise ScanError(f"{name}: no such file")
-    if p.is_dir():
-        raise ScanError(f"{name}: is a directory, not a scan file")
-    if p.suffix.lower() not in formats:
-        shown = f"'{p.suffix}'" if p.suffix else "(no extension)"
-        raise ScanError(f"{name}: {unknown.format(shown=shown)} "
-                        f"(expected one of {', '.join(formats)})")
-    try:
-        size = p.stat().st_size
-    except OSError as exc:
-        raise ScanError(f"{name}: cannot read ({exc.strerror})") from None
-    if size == 0:
-        raise ScanError(f"{name}: empty file (0 bytes)")
-    return p, name
-
-
 def load_scan(
-    path: str | os.PathLike[str], *, min_points: int = 10, height_field: bool = True
+    path: str | os.PathLike[str], *, min_points: int = 10, height_field: bool = True,
+    options: Any = None,
 ) -> Scan:
     """Load a range scan or mesh file as a :class:`Scan`.
 
@@ -102,8 +73,17 @@ def load_scan(
         ``.npy``
             An (N, 3) real array: x, y, z. Other column counts are refused (an extra
             column may be an intensity, a weight or anything else).
+        ``.png``, ``.tif``, ``.tiff``, ``.npz`` (and ``.npy`` with ``options.cell``)
+            Range grids: depth images (16-bit PNG, 16-bit or float TIFF) and elevation
+            grids (GeoTIFF, arrays), triangulated by pixel adjacency and cut at depth
+            jumps (:mod:`asrbf_mesh._range_io`).
+        ``.las``, ``.laz``
+            LiDAR point clouds (the ``lidar`` extra), filtered by class and return.
     min_points : int, default 10
         Fewest points accepted.
+    options : RangeOptions or dict, optional
+        How to read range data (:class:`~asrbf_mesh._range_io.RangeOptions`: depth
+        scale, no-data value, intrinsics, cell size, LiDAR classes and returns).
     height_field : bool, default True
         Also reject points that cannot make a height field over (x, y): all identical,
         no x or y extent, or all on one line in (x, y). ``False`` checks the file only
@@ -129,7 +109,14 @@ def load_scan(
         If ``min_points`` is less than 1.
     """
     min_points = check_int(min_points, "min_points", 1)
+    from ._range_io import RangeOptions, is_range_path, load_range
+
+    opts = RangeOptions.of(options)
     p, name = check_scan_path(path, SUPPORTED_SCAN_FORMATS, "unknown scan format {shown}")
+    if is_range_path(p, opts):
+        scan = load_range(p, opts)[0]
+        _check_points(scan.points, name, min_points, height_field)
+        return scan
     ext = p.suffix.lower()
     reader = READERS[ext]
 
@@ -147,6 +134,12 @@ def load_scan(
     except Exception as exc:  # parser boundary: never leak a third-party traceback
         raise ScanError(f"{name}: cannot read {fmt}: {one_line(exc)}") from None
 
+    _check_points(points, name, min_points, height_field)
+    return Scan(points=points, faces=faces, source=name, grid_shape=grid_shape)
+
+
+def _check_points(points: np.ndarray, name: str, min_points: int, height_field: bool) -> None:
+    """Raise :class:`ScanError` for non-finite points, too few, or (height field) no area."""
     finite = np.isfinite(points).all(axis=1)
     if not finite.all():
         n_bad = int((~finite).sum())
@@ -157,7 +150,6 @@ def load_scan(
         raise ScanError(f"{name}: only {n_pts}, at least {min_points} needed")
     if height_field:
         _check_footprint(points, name)
-    return Scan(points=points, faces=faces, source=name, grid_shape=grid_shape)
 
 
 def _check_footprint(points: np.ndarray, name: str) -> None:

@@ -48,10 +48,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ._atomic import atomic_path, check_output_path
-from ._io import check_scan_path
 from ._learn import MIN_POINTS
 from ._mesh import Scan
-from ._stream import PointBlocks
+from ._readers import PointBlocks, check_scan_path
 from ._validate import check_int, check_points, one_line, plural
 from .errors import ConfigError, ScanError
 

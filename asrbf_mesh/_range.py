@@ -57,6 +57,7 @@ __all__ = [
     "read_range",
     "sniff_range_kind",
     "write_like",
+    "write_mask",
 ]
 
 #: Default of ``jump`` in :meth:`RangeGrid.to_scan` (depth step / lateral footprint).
@@ -754,9 +755,7 @@ def write_like(grid: RangeGrid, z_new: np.ndarray, path: str | os.PathLike,
         raise ConfigError(f"{out}: a {grid.fmt} grid must be written to a "
                           f"{' or '.join(_SUFFIXES[grid.fmt])} file")
     if mask is not None:
-        mask_out = check_output_path(mask, grid.source)
-        if mask_out.suffix.lower() not in (".png", *_TIFF):
-            raise ConfigError(f"{mask_out}: the mask must be a .png or .tif file")
+        _mask_path(mask, grid)
     arr, nodata, new = _stored(grid, z)
     with atomic_path(out) as tmp:
         if grid.fmt in ("png", "tiff"):
@@ -778,6 +777,24 @@ def write_like(grid: RangeGrid, z_new: np.ndarray, path: str | os.PathLike,
             with open(tmp, "wb") as fh:
                 np.savez(fh, **members)
     if mask is not None:
-        filled = (np.isnan(grid.z) & np.isfinite(z)).astype(np.uint8) * np.uint8(255)
-        with atomic_path(mask_out) as tmp:
-            _save_image(tmp, filled, mask_out.suffix.lower())
+        write_mask(grid, z, mask)
+
+
+def _mask_path(mask: str | os.PathLike, grid: RangeGrid) -> Path:
+    from ._atomic import check_output_path
+
+    out = check_output_path(mask, grid.source)
+    if out.suffix.lower() not in (".png", *_TIFF):
+        raise ConfigError(f"{out}: the mask must be a .png or .tif file")
+    return out
+
+
+def write_mask(grid: RangeGrid, z_new: np.ndarray, mask: str | os.PathLike) -> None:
+    """Write a uint8 image (``.png``/``.tif``): 255 where ``grid`` had no data and ``z_new`` has."""
+    out = _mask_path(mask, grid)
+    z = np.asarray(z_new, dtype=np.float64)
+    if z.shape != grid.shape:
+        raise ConfigError(f"z_new must have the grid's shape {grid.shape}, got {z.shape}")
+    filled = (np.isnan(grid.z) & np.isfinite(z)).astype(np.uint8) * np.uint8(255)
+    with atomic_path(out) as tmp:
+        _save_image(tmp, filled, out.suffix.lower())

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Callable, Iterable
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
@@ -22,6 +23,7 @@ import numpy as np
 import plyfile
 
 from ._validate import one_line, plural
+from .errors import ScanError
 
 __all__ = [
     "SUPPORTED_SCAN_FORMATS",
@@ -30,6 +32,8 @@ __all__ = [
     "STL_RECORD",
     "TEXT_PROBE",
     "ParseError",
+    "PointBlocks",
+    "check_scan_path",
     "check_npy_points",
     "check_text",
     "is_count_line",
@@ -48,6 +52,13 @@ SUPPORTED_SCAN_FORMATS: tuple[str, ...] = (
     ".pts",
     ".txt",
     ".npy",
+    # range data, read by asrbf_mesh._range_io (depth images, elevation grids, LiDAR)
+    ".png",
+    ".tif",
+    ".tiff",
+    ".npz",
+    ".las",
+    ".laz",
 )
 
 #: The format's name in messages, by extension.
@@ -60,6 +71,12 @@ FORMAT_NAMES = {
     ".pts": "PTS",
     ".txt": "TXT",
     ".npy": "NPY",
+    ".png": "PNG",
+    ".tif": "TIFF",
+    ".tiff": "TIFF",
+    ".npz": "NPZ",
+    ".las": "LAS",
+    ".laz": "LAZ",
 }
 
 #: Bytes at the start of a point list that :func:`check_text` looks at.
@@ -596,3 +613,66 @@ READERS: dict[str, Callable[[Path], _Parsed]] = {
     ".txt": _read_xyz,
     ".npy": _read_npy,
 }
+
+
+# --------------------------------------------------------------------------- paths, blocks
+
+
+def check_scan_path(path: str | os.PathLike[str], formats: Sequence[str],
+                    unknown: str) -> tuple[Path, str]:
+    """Check that ``path`` is a non-empty file with one of ``formats``; return it and its name.
+
+    ``unknown`` words the format error, with ``{shown}`` standing for the extension.
+
+    Raises
+    ------
+    ScanError
+        One line starting with the path: missing, a directory, another format, empty or
+        unreadable.
+    """
+    p = Path(path)
+    name = os.fsdecode(path)
+    if not p.exists():
+        raise ScanError(f"{name}: no such file")
+    if p.is_dir():
+        raise ScanError(f"{name}: is a directory, not a scan file")
+    if p.suffix.lower() not in formats:
+        shown = f"'{p.suffix}'" if p.suffix else "(no extension)"
+        raise ScanError(f"{name}: {unknown.format(shown=shown)} "
+                        f"(expected one of {', '.join(formats)})")
+    try:
+        size = p.stat().st_size
+    except OSError as exc:
+        raise ScanError(f"{name}: cannot read ({exc.strerror})") from None
+    if size == 0:
+        raise ScanError(f"{name}: empty file (0 bytes)")
+    return p, name
+
+
+class PointBlocks(ABC):
+    """Random access, by block, to the (N, 3) points of a file.
+
+    Attributes
+    ----------
+    path : str
+    n : int
+        Number of points.
+    chunk : int
+        Points per block (the last block may hold fewer).
+    """
+
+    def __init__(self, path: str, n: int, chunk: int) -> None:
+        self.path, self.n, self.chunk = path, n, chunk
+
+    @property
+    def n_blocks(self) -> int:
+        """Number of blocks."""
+        return -(-self.n // self.chunk)
+
+    @abstractmethod
+    def block(self, b: int) -> np.ndarray:
+        """Points of block ``b``, (m, 3) float64."""
+
+    def bounds(self, b: int) -> tuple[int, int]:
+        """First and one-past-last point index of block ``b``."""
+        return b * self.chunk, min((b + 1) * self.chunk, self.n)

@@ -33,7 +33,6 @@ import math
 import os
 import time
 import warnings
-from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from typing import Any
 
@@ -48,7 +47,6 @@ from ._frame import (
     sampling_spacing,
     unit_height_field,
 )
-from ._io import check_scan_path
 from ._learn import MIN_POINTS, auto_d_min, fit_info, learn_from, polish_kind
 from ._network import Network
 from ._outliers import OutlierWarning
@@ -56,7 +54,9 @@ from ._readers import (
     FORMAT_NAMES,
     TEXT_PROBE,
     ParseError,
+    PointBlocks,
     check_npy_points,
+    check_scan_path,
     check_text,
     is_count_line,
     npy_header,
@@ -78,39 +78,10 @@ EXACT_SPACING_MAX = 2_000_000
 #: Points the tile sample aims at above :data:`EXACT_SPACING_MAX`.
 TILE_SAMPLE = 60_000
 #: File formats the streaming fit reads.
-STREAM_FORMATS = (".npy", ".ply", ".xyz", ".pts", ".txt")
+STREAM_FORMATS = (".npy", ".ply", ".xyz", ".pts", ".txt", ".las", ".laz")
 
 
 # --------------------------------------------------------------------------- sources
-
-
-class PointBlocks(ABC):
-    """Random access, by block, to the (N, 3) points of a file.
-
-    Attributes
-    ----------
-    path : str
-    n : int
-        Number of points.
-    chunk : int
-        Points per block (the last block may hold fewer).
-    """
-
-    def __init__(self, path: str, n: int, chunk: int) -> None:
-        self.path, self.n, self.chunk = path, n, chunk
-
-    @property
-    def n_blocks(self) -> int:
-        """Number of blocks."""
-        return -(-self.n // self.chunk)
-
-    @abstractmethod
-    def block(self, b: int) -> np.ndarray:
-        """Points of block ``b``, (m, 3) float64."""
-
-    def bounds(self, b: int) -> tuple[int, int]:
-        """First and one-past-last point index of block ``b``."""
-        return b * self.chunk, min((b + 1) * self.chunk, self.n)
 
 
 class _ArrayBlocks(PointBlocks):
@@ -226,8 +197,12 @@ def _npy_blocks(path: str, name: str, chunk: int) -> PointBlocks:
     return _ArrayBlocks(name, offset, row, shape[0], chunk)
 
 
-def open_points(path: str | os.PathLike[str], chunk: int = DEFAULT_CHUNK) -> PointBlocks:
+def open_points(path: str | os.PathLike[str], chunk: int = DEFAULT_CHUNK,
+                options: Any = None) -> PointBlocks:
     """Open a scan file for reading in blocks (formats: :data:`STREAM_FORMATS`).
+
+    ``options`` (:class:`~asrbf_mesh._range_io.RangeOptions` or a dict) gives a LAS/LAZ
+    file's class and return filters, applied chunk by chunk as the file is read.
 
     The header and format checks are :func:`load_scan`'s (:mod:`asrbf_mesh._readers`).
 
@@ -240,6 +215,12 @@ def open_points(path: str | os.PathLike[str], chunk: int = DEFAULT_CHUNK) -> Poi
     p, name = check_scan_path(path, STREAM_FORMATS,
                               "format {shown} cannot be streamed (load it with load_scan)")
     ext = p.suffix.lower()
+    if ext in (".las", ".laz"):
+        from ._lidar import las_blocks
+        from ._range_io import RangeOptions
+
+        opts = RangeOptions.of(options)
+        return las_blocks(p, chunk, classes=opts.classes, returns=opts.returns)
     if ext == ".ply":
         return _ply_blocks(str(p), name, chunk)
     if ext == ".npy":
@@ -309,13 +290,14 @@ def _warn_far_points(name: str, sample: np.ndarray, lo: np.ndarray, hi: np.ndarr
 def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
                seed: int = 0, view_axis: str = "z", chunk: int = DEFAULT_CHUNK,
                mix: int = DEFAULT_MIX, progress: bool | None = None,
-               **overrides: Any) -> Network:
+               options: Any = None, **overrides: Any) -> Network:
     """Fit an ASRBF network to a scan file too large for memory, block by block.
 
     Parameters
     ----------
     path : str or os.PathLike
-        Points file: NPY (N, 3), binary PLY (vertex x, y, z) or XYZ text.
+        Points file: NPY (N, 3), binary PLY (vertex x, y, z), XYZ text or LAS/LAZ
+        (with ``options``' class and return filters).
     config : FitConfig, optional
         As :func:`asrbf_mesh.fit`; ``polish`` must be ``"weights"`` or ``"none"``
         (the full polish needs every point at once).
@@ -359,7 +341,7 @@ def fit_stream(path: str | os.PathLike[str], config: FitConfig | None = None, *,
     if view_axis not in _AXES:
         raise ConfigError(f"a streaming fit takes view_axis 'z', 'x' or 'y', got {view_axis!r}")
     t_start = time.perf_counter()
-    src = open_points(path, chunk)
+    src = open_points(path, chunk, options)
     name = src.path
     if src.n < MIN_POINTS:
         raise ScanError(f"{name}: only {src.n} points, a fit needs at least {MIN_POINTS}")

@@ -96,6 +96,58 @@ def _add_pieces(p: argparse.ArgumentParser, what: str = "") -> None:
                         f"{what} [default: auto]")
 
 
+class _RangeOption(argparse.Action):
+    """Collect a range-data option into ``namespace.range_options`` (a dict)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        opts = dict(getattr(namespace, "range_options", None) or {})
+        opts[self.dest] = values
+        namespace.range_options = opts
+
+
+def _numbers(kind: type, count: int | None = None, name: str = "") -> Any:
+    """Return an argparse type: comma-separated ``kind`` numbers (``count`` if given)."""
+    def parse(text: str) -> tuple:
+        try:
+            vals = tuple(kind(t) for t in text.split(",") if t.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a comma-separated list of {kind.__name__}s: "
+                                             f"{text!r}") from None
+        if not vals or (count is not None and len(vals) != count):
+            raise argparse.ArgumentTypeError(f"{name or 'the list'} needs "
+                                             f"{count or 'at least one'} numbers, got {text!r}")
+        return vals
+    return parse
+
+
+def _returns(text: str) -> str | tuple[int, ...]:
+    return text if text in ("first", "last", "single") else _numbers(int)(text)
+
+
+def _add_range(p: argparse.ArgumentParser) -> None:
+    """Options of range data: depth images, elevation grids, LiDAR (asrbf_mesh._range_io)."""
+    g = p.add_argument_group("range data (depth images, elevation grids, LAS/LAZ)")
+    kw: dict[str, Any] = {"action": _RangeOption, "default": argparse.SUPPRESS}
+    g.add_argument("--depth-scale", dest="depth_scale", type=float, metavar="S", **kw,
+                   help="depth image units per metre: 5000 for the TUM RGB-D benchmark, 1000 "
+                        "for most RealSense devices (required for integer images)")
+    g.add_argument("--invalid", type=_numbers(float), metavar="V[,V...]", **kw,
+                   help="depth values meaning 'no measurement' [default: 0]")
+    g.add_argument("--intrinsics", type=_numbers(float, 4, "--intrinsics"),
+                   metavar="FX,FY,CX,CY", **kw,
+                   help="pinhole intrinsics (pixels): work in metric camera coordinates "
+                        "[default: the pixel grid, depth in metres]")
+    g.add_argument("--cell", type=float, metavar="C", **kw,
+                   help="cell size of a .npy/.npz elevation array (metres); makes a 2-D "
+                        ".npy an elevation grid")
+    g.add_argument("--classes", type=_numbers(int), metavar="C[,C...]", **kw,
+                   help="LAS/LAZ: keep these classes only, e.g. 2 (ground)")
+    g.add_argument("--returns", type=_returns, metavar="first|last|single|N[,N...]", **kw,
+                   help="LAS/LAZ: keep these returns only")
+    p.set_defaults(range_options=None)
+
+
 def _f(value: Any, spec: str) -> str:
     """``value`` formatted, or ``n/a`` for a figure that does not exist (None, NaN)."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
@@ -170,7 +222,30 @@ def _show_reconstruct(d: dict[str, Any], args: argparse.Namespace) -> None:
     print(f"wrote {d['output']}: {d['vertices']:,} vertices, {d['faces']:,} faces")
 
 
+def _show_fill_grid(d: dict[str, Any], args: argparse.Namespace) -> None:
+    skipped = [h for h in d["holes"] if not h["filled"]]
+    print(f"{args.scan}: {d['holes_found']} holes found (no-data regions open to the border "
+          f"left as they are: {d['border_cells']:,} cells), {d['holes_filled']} filled, "
+          f"{len(skipped)} skipped")
+    shown = d["holes"][:12]
+    for h in shown:
+        state = ("filled" + (" from the far side of a depth edge" if h.get("side") == "far"
+                             else "")) if h["filled"] else f"skipped: {h['reason']}"
+        print(f"  hole {h['index']:>4}  {h['cells']:>7,} cells  size {h['size_abs']:9.4g} "
+              f"({h['size_pct']:5.2f} % of diagonal)  {state}")
+    if len(d["holes"]) > len(shown):
+        rest = d["holes"][len(shown):]
+        print(f"  ... {len(rest):,} smaller holes ({sum(h['cells'] for h in rest):,} cells, "
+              f"{sum(not h['filled'] for h in rest)} skipped)")
+    extra = f" and {d['mask']}" if d.get("mask") else ""
+    print(f"wrote {d['output']}{extra}: {d['cells_filled']:,} cells filled in "
+          f"{d['seconds']:.2f} s (fit {d['fit_seconds']:.2f} s)")
+
+
 def _show_fill_holes(d: dict[str, Any], args: argparse.Namespace) -> None:
+    if "cells_filled" in d:
+        _show_fill_grid(d, args)
+        return
     print(f"{args.scan}: {d['holes_found']} holes found (outer border left open), "
           f"{d['holes_filled']} filled, {len(d['holes_skipped'])} skipped")
     for h in d["holes"]:
@@ -242,7 +317,8 @@ _NOT_OPTIONS = ("command", "run", "show", "json")
 
 def _task_kwargs(args: argparse.Namespace, command: str, quiet: bool) -> dict[str, Any]:
     """Return the namespace of a command as keyword arguments of its task function."""
-    kwargs = {k: v for k, v in vars(args).items() if k not in _NOT_OPTIONS}
+    kwargs = {k: v for k, v in vars(args).items() if k not in _NOT_OPTIONS
+              and not (k == "range_options" and v is None)}
     if "progress" in inspect.signature(_tasks().COMMANDS[command]).parameters:
         kwargs["progress"] = False if quiet else None
     return kwargs
@@ -336,7 +412,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
 
 def _fit_options(f: argparse.ArgumentParser, full: bool = True) -> None:
     if full:
-        f.add_argument("scan", help="scan file (PLY, OBJ, OFF, STL, XYZ/PTS/TXT, NPY)")
+        f.add_argument("scan", help="scan file (PLY, OBJ, OFF, STL, XYZ/PTS/TXT, NPY; depth "
+                                    "image PNG/TIFF, GeoTIFF, NPZ grid, LAS/LAZ)")
         f.add_argument("-o", "--output", required=True, help="output network file (.asrbf)")
     f.add_argument("--float32", action="store_true", help="store parameters in single precision")
     if full:
@@ -349,6 +426,7 @@ def _fit_options(f: argparse.ArgumentParser, full: bool = True) -> None:
     f.add_argument("--mix", type=int, default=None,
                    help="--stream: blocks learned together in a random order [default: 16]")
     _add_pieces(f, " (a --stream fit is always one network)")
+    _add_range(f)
     _add_learning(f, full)
 
 
@@ -356,7 +434,9 @@ def _fill_holes_options(h: argparse.ArgumentParser, full: bool = True) -> None:
     if full:
         h.add_argument("scan", help="scan file (a range grid / mesh, or a bare point cloud)")
         h.add_argument("-o", "--output", required=True,
-                       help="repaired mesh (PLY, OBJ, OFF, STL)")
+                       help="repaired mesh (PLY, OBJ, OFF, STL); for a depth image or "
+                            "elevation grid also the same kind of file (PNG, TIFF, NPY, NPZ), "
+                            "for LAS/LAZ a LAS/LAZ file")
     h.add_argument("--network", help="a network fitted to this scan (fitted here if omitted)")
     h.add_argument("--max-hole-size", default=None,
                    help="fill only holes up to this size: a length in scan units or a "
@@ -366,7 +446,10 @@ def _fill_holes_options(h: argparse.ArgumentParser, full: bool = True) -> None:
     h.add_argument("--lowpass-rel", type=float, default=1.0,
                    help="over a hole use only neurons at least this many times as wide as "
                         "the hole; 0 keeps every neuron [default: 1]")
+    h.add_argument("--mask", help="gridded input: also write a mask image of the filled "
+                                  "cells (uint8, 255 = filled)")
     _add_pieces(h, " (for the fit made here)")
+    _add_range(h)
     if full:
         h.add_argument("--seed", type=int, default=0, help="seed of the fit [default: 0]")
         h.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -386,6 +469,7 @@ def _lod_options(lo: argparse.ArgumentParser, full: bool = True) -> None:
     lo.add_argument("--no-metro", dest="metro", action="store_false",
                     help="skip the Metro error measures")
     _add_pieces(lo)
+    _add_range(lo)
     if full:
         lo.add_argument("--seed", type=int, default=0)
         lo.add_argument("--json", action="store_true", help="print the manifest on stdout")
@@ -405,6 +489,7 @@ def _compare_options(c: argparse.ArgumentParser, full: bool = True) -> None:
     c.add_argument("--som-iterations", type=int, metavar="N",
                    help="SOM training steps (default 500 per node; fewer run faster)")
     _add_pieces(c, " (for the fit made here)")
+    _add_range(c)
     if full:
         c.add_argument("--seed", type=int, default=0)
         c.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -445,6 +530,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--margin", type=float, default=0.0,
                    help="mode full: extend the square by this fraction per side [default: 0]")
     r.add_argument("--json", action="store_true")
+    _add_range(r)
     r.set_defaults(run=_run_task, show=_show_reconstruct)
 
     h = sub.add_parser("fill-holes", help="fill the holes of a scan from its network")
@@ -466,6 +552,7 @@ def build_parser() -> argparse.ArgumentParser:
                                         "reference as vertex quality (view it in MeshLab)")
     m.add_argument("--samples-out", help="write every sample and its distance (.npz)")
     m.add_argument("--json", action="store_true", help="print the result as JSON")
+    _add_range(m)
     m.set_defaults(run=_run_task, show=_show_metro)
 
     c = sub.add_parser("compare", help="our reconstruction vs the SOM baseline (and holes, "

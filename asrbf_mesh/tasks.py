@@ -121,14 +121,16 @@ def _check_fit(*, seed: int, view_axis: str, float32: bool, stream: bool, chunk:
 def fit(scan: str | os.PathLike, output: str | os.PathLike, *, seed: int = 0,
         view_axis: str = "z", float32: bool = False, stream: bool = False,
         chunk: int | None = None, mix: int | None = None, progress: bool | None = None,
-        pieces: str = "auto", **learning: Any) -> dict[str, Any]:
+        pieces: str = "auto", range_options: dict[str, Any] | None = None,
+        **learning: Any) -> dict[str, Any]:
     """``asrbf fit``: fit a network to a scan file and save it (``.asrbf``).
 
     ``learning``: :class:`~asrbf_mesh.FitConfig` fields (``error_threshold``, ``d_min``,
     ``passes``, ``update`` ...); None keeps the default. ``chunk`` (65,536 points) and
     ``mix`` (16 blocks) apply with ``stream=True`` only. ``pieces``: ``"auto"`` (one
     network per smooth piece) or ``"1"`` (one network); a streamed fit is one network
-    and says so in the summary's ``pieces``.
+    and says so in the summary's ``pieces``. ``range_options``: how to read range data
+    (:class:`~asrbf_mesh._range_io.RangeOptions` fields).
     """
     cfg = _check_fit(seed=seed, view_axis=view_axis, float32=float32, stream=stream,
                      chunk=chunk, mix=mix, progress=progress, pieces=pieces,
@@ -141,13 +143,13 @@ def fit(scan: str | os.PathLike, output: str | os.PathLike, *, seed: int = 0,
 
         chunk = DEFAULT_CHUNK if chunk is None else chunk
         mix = DEFAULT_MIX if mix is None else mix
-        open_points(scan, chunk)  # the input's errors first
+        open_points(scan, chunk, range_options)  # the input's errors first
     else:
-        data = load_scan(scan)
+        data = load_scan(scan, options=range_options)
     check_output_path(out, scan)  # before the fit, not after it
     if stream:
         net = fit_stream(scan, cfg, seed=seed, view_axis=view_axis, chunk=chunk, mix=mix,
-                         progress=progress)
+                         progress=progress, options=range_options)
     else:
         from ._fit import fit as fit_scan
 
@@ -194,14 +196,15 @@ def _check_reconstruct(*, resolution: int | None, spacing: float | None, mode: s
 def reconstruct(network: str | os.PathLike, output: str | os.PathLike, *,
                 resolution: int | None = None, spacing: float | None = None,
                 footprint: str | os.PathLike | None = None, mode: str | None = None,
-                margin: float = 0.0) -> dict[str, Any]:
+                margin: float = 0.0, range_options: dict[str, Any] | None = None
+                ) -> dict[str, Any]:
     """``asrbf reconstruct``: mesh a network's surface on a grid (``spacing`` in scan units)."""
     from ._surface import reconstruct as mesh_network
 
     _check_reconstruct(resolution=resolution, spacing=spacing, mode=mode, margin=margin,
                        footprint=footprint)
     net = Network.load(network)
-    fp = load_scan(footprint) if footprint else None
+    fp = load_scan(footprint, options=range_options) if footprint else None
     # the arguments were checked above under the command's names
     mesh = mesh_network(net, resolution=resolution, spacing_abs=spacing, footprint=fp,
                         mode=mode, margin_rel=margin)
@@ -225,24 +228,81 @@ def _check_fill_holes(*, network: Any, max_hole_size: Any, blend: str, lowpass_r
 def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
                network: str | os.PathLike | None = None, max_hole_size: str | float | None = None,
                blend: str = "thin-plate", lowpass_rel: float = 1.0, seed: int = 0,
-               progress: bool | None = None, pieces: str = "auto") -> dict[str, Any]:
+               progress: bool | None = None, pieces: str = "auto",
+               mask: str | os.PathLike | None = None,
+               range_options: dict[str, Any] | None = None) -> dict[str, Any]:
     """``asrbf fill-holes``: fill a scan's holes from its network (fitted if not given).
 
     ``lowpass_rel=0`` keeps every neuron over a hole; ``pieces`` as for :func:`fit` (the
-    fit made here: a given network keeps its own pieces).
+    fit made here: a given network keeps its own pieces). A depth image or elevation
+    grid is filled on its grid (:func:`~asrbf_mesh._grid_fill.fill_grid`) and written
+    in kind when ``output`` has a grid suffix (``mask``: also an image of the filled
+    cells); a LAS/LAZ cloud is written back as the input's points plus the fill's,
+    flagged synthetic, when ``output`` is a LAS/LAZ file.
     """
     from ._holes import fill_holes as fill
+    from ._range_io import RangeOptions, is_range_path, load_range
 
     _check_fill_holes(network=network, max_hole_size=max_hole_size, blend=blend,
                       lowpass_rel=lowpass_rel, seed=seed, progress=progress, pieces=pieces)
-    data = load_scan(scan)
+    opts = RangeOptions.of(range_options)
+    kind = is_range_path(scan, opts)
+    if mask is not None and kind != "grid":
+        raise ConfigError("mask: only a depth image or an elevation grid has a mask of "
+                          "filled cells")
+    data, source = load_range(scan, opts) if kind else (load_scan(scan), None)
     out = check_output_path(output, scan, network)
+    if mask is not None:
+        check_output_path(mask, scan, network, output)
     net = Network.load(network) if network else None
+    if kind == "grid":
+        return _fill_grid_task(source, net, out, mask, max_hole_size, seed, pieces, progress,
+                               (scan, network))
     res = fill(data, net, max_hole_size=max_hole_size, blend=blend,
                lowpass_rel=None if lowpass_rel <= 0 else lowpass_rel, seed=seed,
                progress=progress, pieces=pieces)
-    save_mesh(res.mesh, out, overwrite_inputs=(scan, network))
+    if kind == "lidar" and out.suffix.lower() in (".las", ".laz"):
+        from ._lidar import write_las_with_fill
+
+        added = res.mesh.vertices[len(data.points):]
+        write_las_with_fill(scan, source, added, out)
+    else:
+        save_mesh(res.mesh, out, overwrite_inputs=(scan, network))
     return jsonable(res.to_dict() | {"output": str(out)})
+
+
+_GRID_OUTPUTS = (".png", ".tif", ".tiff", ".npy", ".npz")
+
+
+def _fill_grid_task(grid: Any, net: Network | None, out: Path, mask: Any, max_hole_size: Any,
+                    seed: int, pieces: str, progress: bool | None,
+                    inputs: tuple) -> dict[str, Any]:
+    """Fill a range grid on its grid; write it in kind (grid suffix) or as a mesh."""
+    import dataclasses
+
+    import numpy as np
+
+    from ._grid_fill import fill_grid
+    from ._range import write_like, write_mask
+
+    res = fill_grid(grid, net, max_hole_size=max_hole_size, seed=seed, pieces=pieces,
+                    progress=progress)
+    if out.suffix.lower() in _GRID_OUTPUTS:
+        write_like(grid, res.z_filled, out, mask=mask)
+    else:
+        filled = dataclasses.replace(grid, z=res.z_filled)
+        scan = filled.to_scan()
+        _, index = filled.points()
+        quality = res.filled_mask.ravel()[index].astype(np.float64)
+        from ._mesh import Mesh
+
+        save_mesh(Mesh(scan.points, scan.faces if scan.faces is not None
+                       else np.zeros((0, 3), np.int64), vertex_quality=quality), out,
+                  overwrite_inputs=inputs)
+        if mask is not None:
+            write_mask(grid, res.z_filled, mask)
+    return jsonable(res.to_dict() | {"output": str(out)}
+                    | ({"mask": str(mask)} if mask is not None else {}))
 
 
 # --------------------------------------------------------------------------- lod
@@ -260,7 +320,8 @@ def _check_lod(*, levels: int, method: str, compare_qem: bool, metro: bool,
 
 def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
         method: str = "resample", compare_qem: bool = False, metro: bool = True,
-        seed: int = 0, pieces: str = "auto") -> dict[str, Any]:
+        seed: int = 0, pieces: str = "auto",
+        range_options: dict[str, Any] | None = None) -> dict[str, Any]:
     """``asrbf lod``: write a level-of-detail set and its manifest into the folder ``output``.
 
     Returns the manifest. ``metro=False`` skips the Metro error measures.
@@ -270,7 +331,7 @@ def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
 
     _check_lod(levels=levels, method=method, compare_qem=compare_qem, metro=metro, seed=seed,
                pieces=pieces)
-    data = load_scan(scan)
+    data = load_scan(scan, options=range_options)
     out = check_output_dir(output)
     with atomic_dir(out, LOD_FILES) as tmp:
         lods = lod_set(data, levels=levels, method=method, seed=seed, pieces=pieces)
@@ -283,7 +344,8 @@ def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
 
 def metro(mesh: str | os.PathLike, reference: str | os.PathLike, *, samples: int | None = None,
           seed: int = 0, error_mesh: str | os.PathLike | None = None,
-          samples_out: str | os.PathLike | None = None) -> dict[str, Any]:
+          samples_out: str | os.PathLike | None = None,
+          range_options: dict[str, Any] | None = None) -> dict[str, Any]:
     """``asrbf metro``: Metro distances between a mesh and a reference scan.
 
     ``error_mesh``: also write the mesh with its per-vertex error as quality;
@@ -295,8 +357,8 @@ def metro(mesh: str | os.PathLike, reference: str | os.PathLike, *, samples: int
 
     check_seed(seed)
     # Metro fits nothing: any mesh with a face, any reference with a point
-    a = load_scan(mesh, min_points=1, height_field=False)
-    b = load_scan(reference, min_points=1, height_field=False)
+    a = load_scan(mesh, min_points=1, height_field=False, options=range_options)
+    b = load_scan(reference, min_points=1, height_field=False, options=range_options)
     outs = [x for x in (error_mesh, samples_out) if x]
     for x in outs:
         check_output_path(x, mesh, reference)
@@ -336,14 +398,15 @@ def _check_compare(*, network: Any, holes: bool, lod: bool, meshes: bool,
 def compare(scan: str | os.PathLike, output: str | os.PathLike, *,
             network: str | os.PathLike | None = None, holes: bool = False, lod: bool = False,
             meshes: bool = True, som_iterations: int | None = None, seed: int = 0,
-            progress: bool | None = None, pieces: str = "auto") -> dict[str, Any]:
+            progress: bool | None = None, pieces: str = "auto",
+            range_options: dict[str, Any] | None = None) -> dict[str, Any]:
     """``asrbf compare``: our reconstruction vs the SOM baseline, report in folder ``output``."""
     from .evaluate._report import compare as run_compare
     from .evaluate._report import write_compare
 
     _check_compare(network=network, holes=holes, lod=lod, meshes=meshes,
                    som_iterations=som_iterations, seed=seed, progress=progress, pieces=pieces)
-    data = load_scan(scan)
+    data = load_scan(scan, options=range_options)
     out = check_output_dir(output)
     net = Network.load(network) if network else None
     with atomic_dir(out, COMPARE_FILES) as tmp:
@@ -465,9 +528,14 @@ def check_options(command: str, **options: Any) -> dict[str, Any]:
         if k not in keywords and not takes_any:
             raise ConfigError(f"{k} is not an option of {command}")
     values = keywords | options
+    if "range_options" in values:  # how range files are read: checked as a whole
+        from ._range_io import RangeOptions
+
+        RangeOptions.of(values.pop("range_options"))
+    values.pop("mask", None)  # an output path, checked when it is written
     if command == "fit":
         learning = {k: v for k, v in values.items() if k not in keywords}
-        _check_fit(**{k: values[k] for k in keywords}, learning=learning)
+        _check_fit(**{k: values[k] for k in keywords if k in values}, learning=learning)
     elif command in _CHECKS:
         _CHECKS[command](**values)
     elif command == "reconstruct":
