@@ -109,7 +109,10 @@ class GridHoleInfo:
     ring_cells : int
         Valid cells the residual spline was fitted to (after thinning).
     side : str or None
-        ``"far"`` when the ring straddled a depth edge and only its far side was used.
+        ``"far"`` when the ring straddled a depth edge and only its far side was used;
+        ``"membrane"`` when the network and the ring's thin plate failed (a fill behind
+        the camera or far outside the ring's values) and a harmonic membrane of the
+        values around the hole filled it.
     """
 
     index: int
@@ -371,6 +374,10 @@ def fill_grid(grid: RangeGrid, net: Network | None = None, *,
             continue
         z, n_ring, side, reason = _fill_hole(hole, ring, grid, cells, net, local, row_of,
                                              zflat, size)
+        if reason is not None:  # the spline failed or left the ring's range: a membrane
+            z, why = _membrane(hole, ring if side == "far" else None, valid, zflat), reason
+            reason = None if z is not None else why
+            side = "membrane" if z is not None else side
         if reason is not None:
             infos.append(GridHoleInfo(**base, filled=False, reason=reason, ring_cells=n_ring,
                                       side=side))
@@ -454,4 +461,55 @@ def _fill_hole(hole: np.ndarray, ring: np.ndarray, grid: RangeGrid, cells: _Cell
             break
     if grid.kind == "depth" and np.any(z <= 0):
         return np.zeros(0), len(rl), side, "the fill reaches behind the camera (depth <= 0)"
+    zr = zflat[ring]
+    lo, hi = float(zr.min()), float(zr.max())
+    if np.any(z < lo - (hi - lo)) or np.any(z > hi + (hi - lo)):
+        return np.zeros(0), len(rl), side, "the fill leaves its ring's range"
     return z, len(rl), side, None
+
+
+def _membrane(hole: np.ndarray, allowed: np.ndarray | None, valid: np.ndarray,
+              zflat: np.ndarray) -> np.ndarray | None:
+    """Harmonic interpolation over a hole's cells of its valid 4-neighbours' values.
+
+    The fallback when the network and the ring's thin plate fail (a one-sided ring
+    extrapolated behind the camera or far beyond its range): a discrete Laplace equation
+    whose solution stays within the values around the hole. ``allowed`` limits the
+    boundary to those cells (a depth edge's far side: the near side is left free).
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import spsolve
+
+    H, W = valid.shape
+    n = len(hole)
+    at = np.full(H * W, -1, dtype=np.int64)
+    at[hole] = np.arange(n)
+    rows, cols = np.divmod(hole, W)
+    ok_boundary = valid.ravel().copy()
+    if allowed is not None:
+        ok_boundary[:] = False
+        ok_boundary[allowed] = True
+    diag = np.zeros(n)
+    rhs = np.zeros(n)
+    ii: list[np.ndarray] = []
+    jj: list[np.ndarray] = []
+    for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        r, c = rows + dr, cols + dc
+        inside = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+        nb = np.where(inside, r * W + c, 0)
+        inner = inside & (at[nb] >= 0)
+        ii.append(np.flatnonzero(inner))
+        jj.append(at[nb[inner]])
+        edge = inside & ~inner & ok_boundary[nb]
+        diag += inner + edge
+        np.add.at(rhs, np.flatnonzero(edge), zflat[nb[edge]])
+    known = zflat[ok_boundary & valid.ravel()]
+    if len(known) == 0:
+        return None
+    eps = 1e-9  # keeps parts of the hole without a boundary cell at the boundary's median
+    i, j = np.concatenate(ii), np.concatenate(jj)
+    A = sp.coo_matrix((np.r_[diag + eps, -np.ones(len(i))], (np.r_[np.arange(n), i],
+                                                            np.r_[np.arange(n), j])),
+                      shape=(n, n)).tocsc()
+    z = spsolve(A, rhs + eps * float(np.median(known)))
+    return z if np.all(np.isfinite(z)) else None

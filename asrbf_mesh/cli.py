@@ -229,8 +229,9 @@ def _show_fill_grid(d: dict[str, Any], args: argparse.Namespace) -> None:
           f"{len(skipped)} skipped")
     shown = d["holes"][:12]
     for h in shown:
-        state = ("filled" + (" from the far side of a depth edge" if h.get("side") == "far"
-                             else "")) if h["filled"] else f"skipped: {h['reason']}"
+        how = {"far": " from the far side of a depth edge",
+               "membrane": " (a membrane of the values around it)"}.get(h.get("side"), "")
+        state = f"filled{how}" if h["filled"] else f"skipped: {h['reason']}"
         print(f"  hole {h['index']:>4}  {h['cells']:>7,} cells  size {h['size_abs']:9.4g} "
               f"({h['size_pct']:5.2f} % of diagonal)  {state}")
     if len(d["holes"]) > len(shown):

@@ -157,3 +157,34 @@ def test_bad_inputs(smooth_case) -> None:
         fill_grid(grid, res.network, pieces="many")
     with pytest.raises(ScanError, match="no cell holds a measurement"):
         fill_grid(RangeGrid(np.full((5, 5), np.nan), "elevation", cell=1.0))
+
+
+def test_membrane_reproduces_a_plane_and_keeps_to_the_allowed_side() -> None:
+    from asrbf_mesh._grid_fill import _membrane
+
+    r, c = np.mgrid[:30, :40].astype(np.float64)
+    plane = 2.0 + 0.3 * c - 0.1 * r  # harmonic: the membrane is exact
+    hole_mask = _disk(plane.shape, 15, 20, 6)
+    valid = ~hole_mask
+    z = np.where(valid, plane, np.nan).ravel()
+    hole = np.flatnonzero(hole_mask)
+    out = _membrane(hole, None, valid, z)
+    assert np.allclose(out, plane.ravel()[hole], atol=1e-6)
+    # only the right-hand side as boundary: a constant there gives that constant
+    right = np.flatnonzero((c.ravel() > 20) & valid.ravel())
+    z2 = np.where(valid.ravel(), np.where(c.ravel() > 20, 5.0, -100.0), np.nan)
+    out2 = _membrane(hole, right, valid, z2)
+    assert np.allclose(out2, 5.0, atol=1e-6)
+
+
+def test_a_hole_the_spline_cannot_fill_gets_a_membrane(smooth_case, monkeypatch) -> None:
+    import asrbf_mesh._grid_fill as gf
+
+    grid, truth, voids, _, res = smooth_case
+    monkeypatch.setattr(gf, "_fill_hole", lambda hole, *a: (np.zeros(0), 0, None,
+                                                            "the fill is not finite"))
+    out = fill_grid(grid, res.network)
+    assert out.holes_filled == 2 and all(h.side == "membrane" for h in out.holes)
+    assert np.all(np.isfinite(out.z_filled[voids]))
+    lo, hi = np.nanmin(grid.z), np.nanmax(grid.z)
+    assert np.all((out.z_filled[voids] >= lo) & (out.z_filled[voids] <= hi))
