@@ -54,7 +54,8 @@ _CENTRE_BOX = (-0.25, 1.25)
 _SIGMA_RANGE = (1e-5, 2.0)
 _CHUNK = 16_384
 _LOG_POINTS = 2_000
-_GEKF_MAX = 2_000
+_GEKF_MAX = 2_000  # neurons: the GEKF's full covariance is (1 + 4 K)^2 floats
+_SLOTS = 1_024  # neuron slots allocated first (GEKF: 256), doubled when full
 #: Fraction of points on folds (see :func:`~asrbf_mesh._frame.fold_fraction`) above which
 #: the polish is skipped: most points fold over, the data is not a height field.
 FOLD_NO_POLISH = 0.5
@@ -159,7 +160,7 @@ class _State:
         self.log_amp = np.zeros(n_log)
         self.gekf = cfg.update == "gekf"
         self.cap = 0
-        self._alloc(256 if self.gekf else 1024)
+        self._alloc(min(256, _GEKF_MAX) if self.gekf else _SLOTS)
 
     # per-slot arrays and their fill values
     _SLOT = {"W": (np.float64, (4,), 0.0), "P": (np.float64, (4, 4), 0.0),
@@ -180,10 +181,6 @@ class _State:
             setattr(self, name, arr)
         if self.gekf:
             n = 1 + 4 * cap
-            if n > 8001:
-                raise FitError(
-                    "the GEKF updater holds a full covariance and is limited to 2000 neurons; "
-                    "this fit needs more (use update='nekf' or a subsample)")
             pg = np.zeros((n, n))
             if old:
                 m = 1 + 4 * old
@@ -208,6 +205,11 @@ class _State:
             if status == _lk.DONE:
                 return
             if status == _lk.NEED_SLOTS:
+                if self.gekf and self.cap >= _GEKF_MAX:
+                    raise FitError(
+                        f"the GEKF updater holds a full covariance and is limited to "
+                        f"{_GEKF_MAX} neurons; this fit needs more (use update='nekf' or a "
+                        "subsample)")
                 self._alloc(min(2 * self.cap, _GEKF_MAX) if self.gekf else 2 * self.cap)
             else:  # NEED_LOG: cannot happen with the precomputed size; be safe
                 for name in ("log_t", "log_k", "log_rms", "log_sig", "log_amp"):

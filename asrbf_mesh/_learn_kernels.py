@@ -454,9 +454,10 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
     """Run Algorithm 1 on observations ``order[start:]`` until ``st[ST_T] == t_end``.
 
     Parameters are the state arrays owned by ``asrbf_mesh._learn._State``. Returns
-    ``(status, position)``: ``DONE`` when the chunk is consumed, ``NEED_SLOTS`` when a
-    neuron must be added but every slot is used (grow ``W`` etc. and call again
-    from ``position``), ``NEED_LOG`` when the log arrays are full.
+    ``(status, position)``: ``DONE`` when the chunk is consumed, ``NEED_SLOTS`` when
+    every slot is used and the next step may add a neuron (grow ``W`` etc. and call
+    again from ``position``: the step has not started), ``NEED_LOG`` when the log arrays
+    are full.
     """
     cap = W.shape[0]
     nparam_full = Pg.shape[0] if ci[CI_UPDATE] == UPDATE_GEKF else 0
@@ -488,6 +489,11 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
     n_order = order.shape[0]
     while pos < n_order and st[ST_T] < t_end:
         t = st[ST_T]
+        # a step that may add a neuron needs a free slot: ask for more slots before the
+        # step changes anything (its residual in the RMS window, a log row), so that the
+        # step, run again after the slots grew, counts its observation once
+        if st[ST_NFREE] == 0 and st[ST_SLOTS] >= cap and st[ST_K] < ci[CI_MAXK]:
+            return NEED_SLOTS, pos
         if stride > 0 and t % stride == 0:
             nl = st[ST_NLOG]
             if nl >= log_t.shape[0]:
@@ -544,11 +550,9 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
             if st[ST_NFREE] > 0:
                 st[ST_NFREE] -= 1
                 s = free[st[ST_NFREE]]
-            elif st[ST_SLOTS] < cap:
+            else:  # a free slot exists: checked at the start of the step
                 s = st[ST_SLOTS]
                 st[ST_SLOTS] += 1
-            else:
-                return NEED_SLOTS, pos
             sig = cf[CF_PSI] * (dist if near >= 0 else D)
             sig = min(max(sig, cf[CF_SMIN]), cf[CF_SMAX])
             W[s, 0] = r

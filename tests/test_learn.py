@@ -367,3 +367,30 @@ def test_a_closed_surface_fits_in_seconds_not_minutes(syn) -> None:
     assert time.perf_counter() - t < 30
     assert any("polish is skipped" in str(w.message) for w in record)
     assert net.info["ebar_sequential"] == net.info["ebar"]
+
+
+def test_slots_growing_mid_fit_count_each_observation_once(franke40, monkeypatch) -> None:
+    """Starting from 4 slots (doubled 5 times during the fit) gives the very same network
+    and log as starting with room for every neuron: a step interrupted to grow the slot
+    arrays must not push its residual into the RMS window (or its log row) twice."""
+    import asrbf_mesh._learn as learn_mod
+
+    cfg = FitConfig(polish="none", passes=1)
+    monkeypatch.setattr(learn_mod, "_SLOTS", 1 << 12)
+    roomy = am.fit(franke40, cfg, seed=3, pieces=1)
+    monkeypatch.setattr(learn_mod, "_SLOTS", 4)
+    tight = am.fit(franke40, cfg, seed=3, pieces=1)
+    assert roomy.n_neurons > 64
+    assert np.array_equal(roomy.centers, tight.centers)
+    assert np.array_equal(roomy.weights, tight.weights)
+    assert np.array_equal(roomy.log.step, tight.log.step)
+    assert np.array_equal(roomy.log.rms, tight.log.rms)
+
+
+def test_gekf_beyond_its_neuron_limit_raises_instead_of_hanging(franke39, monkeypatch) -> None:
+    import asrbf_mesh._learn as learn_mod
+    from asrbf_mesh.errors import FitError
+
+    monkeypatch.setattr(learn_mod, "_GEKF_MAX", 8)
+    with pytest.raises(FitError, match="limited to 8 neurons"):
+        am.fit(franke39, FitConfig(update="gekf", polish="none", passes=1), seed=0, pieces=1)
