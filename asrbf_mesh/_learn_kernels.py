@@ -464,6 +464,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
     sup_idx = np.empty(cap, np.int64)
     sup_phi = np.empty(cap)
     sup_d2 = np.empty(cap)
+    sup_pi = np.empty(cap)
     nb_idx = np.empty(cap, np.int64)
     nb_d2 = np.empty(cap)
     g = np.empty(4)
@@ -521,6 +522,9 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
         fk, sabs, m = _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count,
                                      sup_idx, sup_phi, sup_d2)
         r = z - (fs[FS_A0] + fk)
+        if prune_mode != PRUNE_NONE:  # |Pi_k| of this observation's output, before the update
+            for u in range(m):
+                sup_pi[u] = abs(W[sup_idx[u], 0]) * sup_phi[u]
         wp = st[ST_WPOS]
         if st[ST_WCOUNT] == window:
             fs[FS_WSUM] -= wbuf[wp]
@@ -738,12 +742,14 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
                 _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt,
                                 l_prv, l_cell, l_lev, lev_off, lev_count)
 
-        # Stage 3: pruning by contribution ratio r_k = |Pi_k| / sum |Pi_j| (eqs. 11-13).
+        # Stage 3: pruning by contribution ratio r_k = |Pi_k| / sum |Pi_j| (eqs. 11-13),
+        # both of the output of Stage 1 (before the update: numerator and denominator of
+        # the same network)
         if prune_mode == PRUNE_LITERAL:
             thr = cf[CF_PRUNE] * sabs
             for u in range(m):
                 s = sup_idx[u]
-                if alive[s] and abs(W[s, 0]) * sup_phi[u] >= thr:
+                if alive[s] and sup_pi[u] >= thr:
                     last_active[s] = t
             while st[ST_HEAP] > 0 and hk[0] <= t:
                 s = hs[0]
@@ -765,7 +771,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
                 s = sup_idx[u]
                 if alive[s] == 0:
                     continue
-                if abs(W[s, 0]) * sup_phi[u] >= thr:
+                if sup_pi[u] >= thr:
                     miss[s] = 0
                 else:
                     miss[s] += 1
