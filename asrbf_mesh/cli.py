@@ -49,7 +49,7 @@ _LEARNING_OPTIONS: list[tuple[str, str, type, str]] = [
     ("error_threshold", "--error-threshold", float, "E, local error threshold (criterion 2)"),
     ("rms_threshold", "--rms-threshold", float, "E_omega, windowed RMS threshold (criterion 3)"),
     ("d_max", "--d-max", float, "D_max, initial neuron separation (criterion 1)"),
-    ("d_min", "--d-min", float, "D_min, neuron separation level (default: 2 x scan spacing)"),
+    ("d_min", "--d-min", float, "D_min, neuron separation level (default: max(2 x scan spacing, E), at most 0.2)"),
     ("gamma", "--gamma", float, "gamma, decay factor of the separation distance, eq. (4)"),
     ("psi", "--psi", float, "psi, overlap factor of new neuron widths, eq. (7)"),
     ("window", "--window", int, "omega, RMS window (criterion 3) and pruning window"),
@@ -69,14 +69,17 @@ _LEARNING_OPTIONS: list[tuple[str, str, type, str]] = [
 _CHOICE_OPTIONS = [
     ("update", "--update", UPDATES, "parameter updater"),
     ("pruning", "--pruning", PRUNINGS, "pruning rule ('literal' is the paper's)"),
-    ("decay", "--decay", DECAYS, "index of eq. (4): observation count or neuron count"),
-    ("polish", "--polish", POLISHES, "batch stage after learning ('none' is the paper)"),
+    ("decay", "--decay", DECAYS, "index of eq. (4): observation count (the paper's) or "
+                                 "neuron count"),
+    ("polish", "--polish", POLISHES, "batch stage after learning ('none' is the paper's)"),
 ]
 
 
 def _add_learning(p: argparse.ArgumentParser, full: bool = True) -> None:
     d = FitConfig()
-    g = p.add_argument_group("learning parameters (unit cube; paper section 5.1 defaults)")
+    g = p.add_argument_group("learning parameters (unit cube; the numeric defaults are the "
+                                 "paper's section 5.1 values; --pruning and --polish default "
+                                 "to this package's choices, the paper's are named)")
     for field, flag, typ, text in _LEARNING_OPTIONS:
         g.add_argument(flag, dest=field, type=typ, default=None,
                        help=f"{text} [default: {getattr(d, field)}]")
