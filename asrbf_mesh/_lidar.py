@@ -191,8 +191,40 @@ def _quiet() -> Iterator[None]:
         log.setLevel(old)
 
 
+def _check_header(path: Path, name: str) -> None:
+    """Check the public header block's counts against the file's size before laspy reads it.
+
+    laspy trusts the header: a corrupt count of variable-length records (3 billion in a
+    952-byte file, found by fuzzing) made it loop for ever. The counts and offsets must
+    fit in the file: header size <= offset to the points <= file size, every VLR (54
+    bytes of header at least) between the two, and LAS 1.4's extended VLRs (60 bytes at
+    least) inside the file.
+    """
+    import struct
+
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(375)
+    if len(head) < 227 or head[:4] != b"LASF":
+        raise ScanError(f"{name}: not a LAS file (no LASF signature and 227-byte header)")
+    minor = head[25]
+    header_size, offset, n_vlr = struct.unpack_from("<HLL", head, 94)
+    if not 227 <= header_size <= offset <= size:
+        raise ScanError(f"{name}: corrupt LAS header: header size {header_size}, points at "
+                        f"byte {offset:,}, file of {size:,} bytes")
+    if n_vlr * 54 > offset - header_size:
+        raise ScanError(f"{name}: corrupt LAS header: {n_vlr:,} variable-length records "
+                        f"cannot fit in {offset - header_size:,} bytes")
+    if minor >= 4 and header_size >= 375 and len(head) >= 375:
+        start, n_evlr = struct.unpack_from("<QL", head, 235)
+        if n_evlr and not (offset <= start and start + 60 * n_evlr <= size):
+            raise ScanError(f"{name}: corrupt LAS header: {n_evlr:,} extended records from "
+                            f"byte {start:,} in a file of {size:,} bytes")
+
+
 def _open(laspy: Any, path: Path, name: str) -> Any:
     """Open ``path`` for reading (header only); LAZ checks its backend first."""
+    _check_header(path, name)
     backend = None
     if path.suffix.lower() == ".laz":
         backend = _laz_backends(laspy, name)

@@ -17,13 +17,17 @@ header, which the commands need to write their output in kind.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ._mesh import Scan
-from .errors import ConfigError
+from ._validate import one_line
+from .errors import AsrbfError, ConfigError, ScanError
 
 __all__ = ["GRID_SUFFIXES", "LIDAR_SUFFIXES", "RangeOptions", "is_range_path", "load_range"]
 
@@ -112,11 +116,31 @@ def load_range(path: str | os.PathLike, options: RangeOptions | None = None
         requested class, a LAZ without lazrs, ...
     """
     options = options or RangeOptions()
-    if is_range_path(path, options) == "lidar":
-        from ._lidar import read_las
+    try:
+        with _quiet("tifffile"):
+            if is_range_path(path, options) == "lidar":
+                from ._lidar import read_las
 
-        return read_las(path, classes=options.classes, returns=options.returns)
-    from ._range import read_range, sniff_range_kind
+                return read_las(path, classes=options.classes, returns=options.returns)
+            from ._range import read_range, sniff_range_kind
 
-    grid = read_range(path, **options.grid_kwargs(sniff_range_kind(path)))
-    return grid.to_scan(), grid
+            grid = read_range(path, **options.grid_kwargs(sniff_range_kind(path)))
+            return grid.to_scan(), grid
+    except (AsrbfError, MemoryError):
+        raise
+    except Exception as exc:  # parser boundary: a corrupt file never leaks a traceback
+        name = os.fsdecode(path)
+        raise ScanError(f"{name}: cannot read {Path(name).suffix.lstrip('.').upper()}: "
+                        f"{one_line(exc)}") from None
+
+
+@contextlib.contextmanager
+def _quiet(logger: str) -> Iterator[None]:
+    """Silence a library's logger (tifffile logs every bad tag it skips) for a while."""
+    log = logging.getLogger(logger)
+    level = log.level
+    log.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        log.setLevel(level)

@@ -45,7 +45,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 FUZZ = ROOT / "fuzz"
 TARGETS = ("scan", "asrbf")
-EXTS = (".ply", ".obj", ".off", ".stl", ".xyz", ".pts", ".txt", ".npy")
+EXTS = (".ply", ".obj", ".off", ".stl", ".xyz", ".pts", ".txt", ".npy", ".png", ".tif", ".npz",
+        ".las")
+#: How range files are read (a depth scale for integer images, a cell size for arrays).
+RANGE_OPTIONS = {".png": {"depth_scale": 1000.0}, ".tif": {"depth_scale": 1000.0},
+                 ".npz": {"cell": 2.0}}
 _TMP = Path(tempfile.mkdtemp(prefix="asrbf-fuzz-", dir="/dev/shm" if os.path.isdir(
     "/dev/shm") else None))
 
@@ -86,6 +90,40 @@ def _seed_scans() -> dict[str, bytes]:
     buf = io.BytesIO()
     np.save(buf, v)
     seeds["pts.npy"] = bytes([EXTS.index(".npy")]) + buf.getvalue()
+    seeds.update(_seed_range(rng))
+    return seeds
+
+
+def _seed_range(rng) -> dict[str, bytes]:
+    """Small range files: 16-bit PNG and float TIFF depth images, an NPZ grid, a LAS cloud."""
+    import numpy as np
+    from PIL import Image
+
+    depth = (1000 + 50 * rng.random((8, 10))).astype(np.uint16)
+    depth[3:5, 4:6] = 0
+    seeds: dict[str, bytes] = {}
+    buf = io.BytesIO()
+    Image.fromarray(depth).save(buf, format="PNG")
+    seeds["depth.png"] = bytes([EXTS.index(".png")]) + buf.getvalue()
+    import tifffile
+
+    buf = io.BytesIO()
+    tifffile.imwrite(buf, depth.astype(np.float32) / 1000.0)
+    seeds["depth.tif"] = bytes([EXTS.index(".tif")]) + buf.getvalue()
+    buf = io.BytesIO()
+    np.savez(buf, elevation=depth.astype(np.float64), cell=np.asarray(2.0))
+    seeds["dem.npz"] = bytes([EXTS.index(".npz")]) + buf.getvalue()
+    try:
+        import laspy
+    except ImportError:
+        return seeds
+    las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+    xy = rng.random((30, 2)) * 10
+    las.x, las.y, las.z = xy[:, 0], xy[:, 1], np.sin(xy[:, 0])
+    las.classification = np.full(30, 2, np.uint8)
+    out = _TMP / "seed.las"
+    las.write(out)
+    seeds["cloud.las"] = bytes([EXTS.index(".las")]) + out.read_bytes()
     return seeds
 
 
@@ -146,13 +184,15 @@ def check_scan(data: bytes) -> bool:
 
     if not data:
         return False
-    path = _TMP / f"in{EXTS[data[0] % len(EXTS)]}"
+    ext = EXTS[(data[0] & 0x7F) % len(EXTS)]
+    path = _TMP / f"in{ext}"
     path.write_bytes(data[1:])
     hf = bool(data[0] & 0x80)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            scan = load_scan(path, min_points=1, height_field=hf)
+            scan = load_scan(path, min_points=1, height_field=hf,
+                             options=RANGE_OPTIONS.get(ext))
     except AsrbfError as exc:
         msg = str(exc)
         if "\n" in msg or not msg.startswith(str(path)):

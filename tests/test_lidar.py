@@ -535,3 +535,17 @@ def test_laspy_log_level_restored(las_file: Path) -> None:
     with pytest.raises(ScanError):
         read_las(las_file, classes=(6,))
     assert log.level == before
+
+
+def test_a_corrupt_record_count_is_refused_not_looped_on(tmp_path: Path) -> None:
+    """Found by fuzzing: 3 billion VLRs claimed by a 952-byte file made laspy loop forever."""
+    import struct
+
+    src = make_las(tmp_path / "tile.las")
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<L", data, 100, 3_463_577_600)
+    bad = tmp_path / "bad.las"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(ScanError, match="variable-length records cannot fit") as exc:
+        read_las(bad)
+    assert "\n" not in str(exc.value)
