@@ -306,6 +306,7 @@ def _read_png(path: Path) -> np.ndarray:
     try:
         with Image.open(path) as im:
             mode, bands = im.mode, len(im.getbands())
+            _check_size(path, im.size, 1, True)
             arr = np.array(im) if mode in ("L", "I", "I;16", "I;16B", "I;16L", "F") else None
     except (OSError, UnidentifiedImageError, ValueError) as exc:
         raise _open_error(path, exc) from None
@@ -315,6 +316,23 @@ def _read_png(path: Path) -> np.ndarray:
     if mode == "I" and arr.size and arr.min() >= 0 and arr.max() <= 65535:
         arr = arr.astype(np.uint16)  # Pillow opens some 16-bit PNGs as 32-bit "I"
     return arr
+
+
+#: Most cells a range image may hold (a 40,000 x 25,000 tile): a corrupt header claiming
+#: billions of pixels is refused instead of allocating them.
+MAX_CELLS = 1_000_000_000
+
+
+def _check_size(path: Path, shape: tuple[int, ...], itemsize: int, compressed: bool) -> None:
+    """Refuse an image whose header claims more cells than a file of its size can hold."""
+    cells = int(np.prod(shape, dtype=np.float64)) if len(shape) else 0
+    if cells > MAX_CELLS:
+        raise ScanError(f"{path}: the image claims {cells:,} cells (shape {tuple(shape)}), "
+                        f"more than {MAX_CELLS:,}: a corrupt header?")
+    size = path.stat().st_size
+    if not compressed and cells * itemsize > size:
+        raise ScanError(f"{path}: truncated: {cells:,} cells of {itemsize} bytes in a file "
+                        f"of {size:,} bytes")
 
 
 def _tiff_page(path: Path) -> tuple[np.ndarray, dict[int, Any], bool]:
@@ -332,6 +350,7 @@ def _tiff_page(path: Path) -> tuple[np.ndarray, dict[int, Any], bool]:
             tags = {t.code: (int(t.dtype), t.count, t.value) for t in page.tags.values()}
             compressed = int(page.compression) != 1
             dtype, shape = page.dtype, page.shape
+            _check_size(path, shape, np.dtype(dtype).itemsize, compressed)
             try:
                 arr = page.asarray()
             except ValueError as exc:

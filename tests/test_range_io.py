@@ -486,3 +486,16 @@ def test_writer_refuses_bad_targets(tmp_path: Path) -> None:
         write_like(g, g.z, src)
     assert _digest(src) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.png"]
+
+
+def test_a_header_claiming_billions_of_cells_is_refused(tmp_path: Path) -> None:
+    """Found by fuzzing: a 300-byte TIFF claiming 13 billion cells asked for 49 GB."""
+    from asrbf_mesh._range import MAX_CELLS, _check_size
+
+    f = tmp_path / "x.tif"
+    f.write_bytes(b"0" * 300)
+    with pytest.raises(ScanError, match="a corrupt header"):
+        _check_size(f, (MAX_CELLS // 1000 + 1, 1001), 4, True)
+    with pytest.raises(ScanError, match="truncated"):
+        _check_size(f, (10, 10), 4, False)
+    _check_size(f, (5, 10), 4, True)  # compressed: may hold more than its size
