@@ -110,7 +110,9 @@ class GridHoleInfo:
     ring_cells : int
         Valid cells the residual spline was fitted to (after thinning).
     side : str or None
-        ``"far"`` when the ring straddled a depth edge and only its far side was used;
+        ``"far"`` when the rim straddled a depth edge and only its far side was used;
+        ``"both"`` when part of the hole (inside the hull of the near side's rim) was
+        filled from the near side and the rest from the far side;
         ``"membrane"`` when the network and the ring's thin plate failed (a fill behind
         the camera or far outside the ring's values) and a harmonic membrane of the
         values around the hole filled it.
@@ -393,7 +395,7 @@ def fill_grid(grid: RangeGrid, net: Network | None = None, *,
         z, n_ring, side, reason = _fill_hole(hole, ring, rim, work, cells, net, local, row_of,
                                              zflat, size)
         if reason is not None:  # the spline failed or left the ring's range: a membrane
-            split = _far_side(work, zflat[rim]) if side == "far" else None
+            split = _far_side(work, zflat[rim]) if side in ("far", "both") else None
             far_ring = ring[zflat[ring] > split] if split is not None else None
             z, why = _membrane(hole, far_ring, valid, zflat), reason
             reason = None if z is not None else why
@@ -438,18 +440,58 @@ def _fill_hole(hole: np.ndarray, ring: np.ndarray, rim: np.ndarray, grid: RangeG
                cells: _Cells,
                net: Network, local: np.ndarray, row_of: np.ndarray, zflat: np.ndarray,
                size: float) -> tuple[np.ndarray, int, str | None, str | None]:
-    """Values (grid units) for one hole's cells; ring cells used, side, reason if none."""
-    side = None
+    """Values (grid units) for one hole's cells; ring cells used, side, reason if none.
+
+    A hole whose rim spans a depth jump is filled from the far side, except its cells
+    inside the convex hull of the near side's rim cells: there the near surface itself
+    runs into the hole (a hole across an object's edge), and they are filled from the
+    near side. Beside a silhouette (a Kinect's projector shadow) the near rim is a thin
+    curve whose hull holds next to no cell, so the shadow continues the background.
+    """
+    args = (grid, cells, net, local, row_of, zflat, size)
     split = _far_side(grid, zflat[rim])
-    if split is not None:
-        ring, side = ring[zflat[ring] > split], "far"
+    if split is None:
+        z, n, reason = _solve(hole, ring, True, *args)
+        return z, n, None, reason
+    rows, cols = np.divmod(hole, grid.shape[1])
+    nr, nc = np.divmod(rim[zflat[rim] <= split], grid.shape[1])
+    inside = _in_hull(np.column_stack([nr, nc]), np.column_stack([rows, cols]))
+    z = np.empty(len(hole))
+    used = 0
     # no substrate beside a depth edge: the network blends the near and far surfaces there
-    fnet = _lowpass(net, size, np.inf if side else _LOWPASS)
+    for part, side_ring in ((~inside, ring[zflat[ring] > split]),
+                            (inside, ring[zflat[ring] <= split])):
+        if part.any():
+            zz, n, reason = _solve(hole[part], side_ring, False, *args)
+            if reason is not None:
+                return np.zeros(0), n, "far", reason
+            z[part] = zz
+            used += n
+    return z, used, "both" if inside.any() else "far", None
+
+
+def _in_hull(pts: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Which points ``q`` lie in the convex hull of ``pts`` (none if it has no area)."""
+    from scipy.spatial import Delaunay, QhullError
+
+    if len(pts) < 3 or len(q) == 0:
+        return np.zeros(len(q), dtype=bool)
+    try:
+        return Delaunay(pts.astype(np.float64)).find_simplex(q.astype(np.float64)) >= 0
+    except (QhullError, ValueError):  # collinear: a straight silhouette
+        return np.zeros(len(q), dtype=bool)
+
+
+def _solve(hole: np.ndarray, ring: np.ndarray, substrate: bool, grid: RangeGrid,
+           cells: _Cells, net: Network, local: np.ndarray, row_of: np.ndarray,
+           zflat: np.ndarray, size: float) -> tuple[np.ndarray, int, str | None]:
+    """Values for cells ``hole`` from ``ring``: substrate + thin plate; cells used, reason."""
+    fnet = _lowpass(net, size, _LOWPASS if substrate else np.inf)
     rl = local[row_of[ring]]
     keep = _thin_out(np.arange(len(ring)), rl[:, :2], _RING_MAX)
     rl = rl[keep]
     if len(rl) < 3:
-        return np.zeros(0), len(rl), side, f"only {len(rl)} valid cells around it"
+        return np.zeros(0), len(rl), f"only {len(rl)} valid cells around it"
     res = rl[:, 2] - fnet.evaluate(rl[:, :2])
     centre = rl[:, :2].mean(axis=0)
     scale = size if size > 0 else 1.0
@@ -475,18 +517,18 @@ def _fill_hole(hole: np.ndarray, ring: np.ndarray, rim: np.ndarray, grid: RangeG
         q[:, 2] = depth(q[:, :2])
         z_new = cells.z_of((q @ R.T)[:, 2])
         if not np.all(np.isfinite(z_new)):
-            return np.zeros(0), len(rl), side, "the fill is not finite"
+            return np.zeros(0), len(rl), "the fill is not finite"
         moved = float(np.max(np.abs(z_new - z))) if len(z) else 0.0
         z = z_new
         if exact or moved <= 1e-9 * max(float(np.max(np.abs(z))), 1e-300):
             break
     if grid.kind == "depth" and np.any(z <= 0):
-        return np.zeros(0), len(rl), side, "the fill reaches behind the camera (depth <= 0)"
+        return np.zeros(0), len(rl), "the fill reaches behind the camera (depth <= 0)"
     zr = zflat[ring]
     lo, hi = float(zr.min()), float(zr.max())
     if np.any(z < lo - (hi - lo)) or np.any(z > hi + (hi - lo)):
-        return np.zeros(0), len(rl), side, "the fill leaves its ring's range"
-    return z, len(rl), side, None
+        return np.zeros(0), len(rl), "the fill leaves its ring's range"
+    return z, len(rl), None
 
 
 def _membrane(hole: np.ndarray, allowed: np.ndarray | None, valid: np.ndarray,

@@ -234,6 +234,7 @@ def _show_fill_grid(d: dict[str, Any], args: argparse.Namespace) -> None:
     shown = d["holes"][:12]
     for h in shown:
         how = {"far": " from the far side of a depth edge",
+               "both": " from both sides of a depth edge",
                "membrane": " (a membrane of the values around it)"}.get(h.get("side"), "")
         state = f"filled{how}" if h["filled"] else f"skipped: {h['reason']}"
         print(f"  hole {h['index']:>4}  {h['cells']:>7,} cells  size {h['size_abs']:9.4g} "
