@@ -283,7 +283,7 @@ def _fill_grid_task(grid: Any, net: Network | None, out: Path, mask: Any, max_ho
     import numpy as np
 
     from ._grid_fill import fill_grid
-    from ._range import write_like, write_mask
+    from ._range_write import write_like, write_mask
 
     res = fill_grid(grid, net, max_hole_size=max_hole_size, seed=seed, pieces=pieces,
                     progress=progress)

@@ -561,7 +561,7 @@ def run_kinect(folder: Path, seeds: list[int], methods: tuple[str, ...], figures
             mask = np.zeros(g.shape, dtype=bool)
             for d, _, _ in cut_disks(g.z, seed):
                 mask |= d
-            from asrbf_mesh._range import write_like
+            from asrbf_mesh._range_write import write_like
 
             src = Path(tmp) / f"{name}_masked.png"
             write_like(g, np.where(mask, np.nan, g.z), src)

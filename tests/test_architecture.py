@@ -47,7 +47,7 @@ ADAPTERS = {
     "dask": ("asrbf_mesh._batch",),
     "distributed": ("asrbf_mesh._batch",),
     "laspy": ("asrbf_mesh._lidar",),
-    "tifffile": ("asrbf_mesh._range",),
+    "tifffile": ("asrbf_mesh._range", "asrbf_mesh._range_write"),
 }
 MAX_LINES = 800
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from asrbf_mesh._grid_fill import fill_grid, grid_holes
-from asrbf_mesh._range import RangeGrid, read_grid_array, write_like
+from asrbf_mesh._range import RangeGrid, read_grid_array
+from asrbf_mesh._range_write import write_like
 from asrbf_mesh.errors import ConfigError, ScanError
 
 DATA = Path(__file__).parent / "data"

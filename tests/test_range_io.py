@@ -20,8 +20,8 @@ from asrbf_mesh._range import (
     read_grid_array,
     read_range,
     sniff_range_kind,
-    write_like,
 )
+from asrbf_mesh._range_write import write_like
 from asrbf_mesh.errors import AsrbfError, ConfigError, ScanError
 
 DATA = Path(__file__).parent / "data"
