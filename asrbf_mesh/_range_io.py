@@ -104,9 +104,12 @@ def is_range_path(path: str | os.PathLike, options: RangeOptions | None = None) 
     return None
 
 
-def load_range(path: str | os.PathLike, options: RangeOptions | None = None
-               ) -> tuple[Scan, Any]:
+def load_range(path: str | os.PathLike, options: RangeOptions | None = None, *,
+               scan: bool = True) -> tuple[Scan | None, Any]:
     """Read a range file as a scan; also the grid (RangeGrid) or the LAS header (LasMeta).
+
+    ``scan=False`` skips triangulating a grid (the grid fill needs only the grid): the
+    scan is then None for a grid.
 
     Raises
     ------
@@ -125,7 +128,7 @@ def load_range(path: str | os.PathLike, options: RangeOptions | None = None
             from ._range import read_range, sniff_range_kind
 
             grid = read_range(path, **options.grid_kwargs(sniff_range_kind(path)))
-            return grid.to_scan(), grid
+            return (grid.to_scan() if scan else None), grid
     except (AsrbfError, MemoryError):
         raise
     except Exception as exc:  # parser boundary: a corrupt file never leaks a traceback

@@ -250,7 +250,8 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
     if mask is not None and kind != "grid":
         raise ConfigError("mask: only a depth image or an elevation grid has a mask of "
                           "filled cells")
-    data, source = load_range(scan, opts) if kind else (load_scan(scan), None)
+    data, source = (load_range(scan, opts, scan=kind != "grid") if kind
+                    else (load_scan(scan), None))
     out = check_output_path(output, scan, network)
     if mask is not None:
         check_output_path(mask, scan, network, output)
