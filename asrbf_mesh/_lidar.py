@@ -38,7 +38,6 @@ Both filters together keep the points that pass each.
 from __future__ import annotations
 
 import contextlib
-import logging
 import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -51,7 +50,7 @@ from ._atomic import atomic_path, check_output_path
 from ._learn import MIN_POINTS
 from ._mesh import Scan
 from ._readers import PointBlocks, check_scan_path
-from ._validate import check_int, check_points, one_line, plural
+from ._validate import check_int, check_points, one_line, plural, quiet_logger
 from .errors import ConfigError, ScanError
 
 __all__ = ["LIDAR_FORMATS", "LasBlocks", "LasMeta", "VlrRecord", "las_blocks", "read_las",
@@ -179,18 +178,6 @@ def _laz_backends(laspy: Any, name: str, verb: str = "reading") -> Any:
     return available
 
 
-@contextlib.contextmanager
-def _quiet() -> Iterator[None]:
-    """Silence laspy's own error log while it runs: its failures become one ScanError."""
-    log = logging.getLogger("laspy")
-    old = log.level
-    log.setLevel(logging.CRITICAL + 1)
-    try:
-        yield
-    finally:
-        log.setLevel(old)
-
-
 def _check_header(path: Path, name: str) -> None:
     """Check the public header block's counts against the file's size before laspy reads it.
 
@@ -229,7 +216,7 @@ def _open(laspy: Any, path: Path, name: str) -> Any:
     if path.suffix.lower() == ".laz":
         backend = _laz_backends(laspy, name)
     try:
-        with _quiet():
+        with quiet_logger("laspy"):
             reader = laspy.open(path, mode="r", laz_backend=backend)
     except Exception as exc:  # parser boundary: never leak a third-party traceback
         raise ScanError(f"{name}: cannot read LAS: {one_line(exc)}") from None
@@ -256,7 +243,7 @@ def _chunks(reader: Any, name: str, chunk: int, start: int = 0) -> Iterator[Any]
     total = int(reader.header.point_count)
     pos = start
     try:
-        with _quiet():
+        with quiet_logger("laspy"):
             if start:
                 reader.seek(start)
             it = reader.chunk_iterator(chunk)
@@ -292,7 +279,7 @@ def _crs(header: Any) -> tuple[Any, tuple[VlrRecord, ...]]:
     crs = None
     if records:
         try:
-            with _quiet():
+            with quiet_logger("laspy"):
                 crs = header.parse_crs()
         except Exception:  # pyproj missing, or a CRS it does not understand
             crs = None
@@ -654,8 +641,9 @@ def write_las_with_fill(src_path: str | os.PathLike[str], meta: LasMeta, fill_po
                             "scales or offsets differ): read it again with read_las")
         with atomic_path(out) as tmp:
             try:
-                with _quiet(), laspy.open(tmp, mode="w", header=header, do_compress=compress,
-                                          laz_backend=backend) as writer:
+                with quiet_logger("laspy"), laspy.open(
+                        tmp, mode="w", header=header, do_compress=compress,
+                        laz_backend=backend) as writer:
                     for pts in _chunks(reader, name, READ_CHUNK):
                         writer.write_points(pts)
                     if len(records):

@@ -17,16 +17,13 @@ header, which the commands need to write their output in kind.
 
 from __future__ import annotations
 
-import contextlib
-import logging
 import os
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ._mesh import Scan
-from ._validate import one_line
+from ._validate import one_line, quiet_logger
 from .errors import AsrbfError, ConfigError, ScanError
 
 __all__ = ["GRID_SUFFIXES", "LIDAR_SUFFIXES", "RangeOptions", "is_range_path", "load_range"]
@@ -120,7 +117,7 @@ def load_range(path: str | os.PathLike, options: RangeOptions | None = None, *,
     """
     options = options or RangeOptions()
     try:
-        with _quiet("tifffile"):
+        with quiet_logger("tifffile"):
             if is_range_path(path, options) == "lidar":
                 from ._lidar import read_las
 
@@ -135,15 +132,3 @@ def load_range(path: str | os.PathLike, options: RangeOptions | None = None, *,
         name = os.fsdecode(path)
         raise ScanError(f"{name}: cannot read {Path(name).suffix.lstrip('.').upper()}: "
                         f"{one_line(exc)}") from None
-
-
-@contextlib.contextmanager
-def _quiet(logger: str) -> Iterator[None]:
-    """Silence a library's logger (tifffile logs every bad tag it skips) for a while."""
-    log = logging.getLogger(logger)
-    level = log.level
-    log.setLevel(logging.CRITICAL + 1)
-    try:
-        yield
-    finally:
-        log.setLevel(level)

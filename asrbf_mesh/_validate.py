@@ -8,10 +8,12 @@ what was expected and what arrived, on one line.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -341,3 +343,19 @@ def strict_json(obj: Any, **kwargs: Any) -> str:
     import json
 
     return json.dumps(jsonable(obj), allow_nan=False, **kwargs)
+
+
+@contextlib.contextmanager
+def quiet_logger(name: str) -> Iterator[None]:
+    """Silence a library's logger for a while.
+
+    laspy and tifffile log what they then raise or skip; their failures become one
+    ScanError line.
+    """
+    log = logging.getLogger(name)
+    level = log.level
+    log.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
