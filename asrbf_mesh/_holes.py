@@ -236,9 +236,10 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
         v, t, reason = fill_loop(loop, vertices, spacing, scan_points, tree)
         if len(t) and _reuses(t, loop, known):  # the disk fill makes fewer chords
             v, t, reason = fill_loop(loop, vertices, spacing, scan_points, tree, disk=True)
-            if len(t) and _reuses(t, loop, known):
-                v, t = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-                reason = "the fill would reuse an edge of the mesh (the rim touches itself)"
+            if len(t) and _reuses(t, loop, known):  # a small loop: chords the mesh lacks
+                v, t = np.zeros((0, 3)), _chords_avoiding(loop, vertices, known)
+                reason = None if len(t) else ("the fill would reuse an edge of the mesh (the "
+                                              "rim touches itself)")
         if len(t) == 0:
             if not owner:
                 infos.append(HoleInfo(len(infos), size, 100.0 * size / diag,
@@ -264,6 +265,58 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
     faces = np.vstack(new_f)
     border = sum(len(loop) for loop in outer_loops(faces, n))
     return np.vstack(new_v), faces, border
+
+
+#: Largest loop :func:`_chords_avoiding` triangulates (O(n^3) dynamic programming).
+_DP_MAX = 40
+
+
+def _chords_avoiding(loop: np.ndarray, vertices: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """Triangulate a small loop without new vertices and without an edge the mesh has.
+
+    The minimum-area triangulation of the polygon (dynamic programming over its
+    diagonals, Barequet & Sharir's scheme as used by Liepa) in which no diagonal joins
+    two vertices the mesh already joins (a quad whose one diagonal is a mesh edge takes
+    the other). Returns (T, 3) mesh vertex ids, empty when none exists or the loop is
+    larger than :data:`_DP_MAX`.
+    """
+    n = len(loop)
+    if n < 3 or n > _DP_MAX:
+        return np.zeros((0, 3), np.int64)
+    p = vertices[loop]
+    a, b = np.minimum.outer(loop, loop), np.maximum.outer(loop, loop)
+    free = ~np.isin(a.astype(np.int64) * _KEY + b, known)
+    for i in range(n):  # the rim's own edges are fine
+        free[i, (i + 1) % n] = free[(i + 1) % n, i] = True
+    cost = np.full((n, n), np.inf)
+    pick = np.full((n, n), -1, dtype=np.int64)
+    for i in range(n - 1):
+        cost[i, i + 1] = 0.0
+    for span in range(2, n):
+        for i in range(n - span):
+            j = i + span
+            if not free[i, j]:
+                continue
+            for k in range(i + 1, j):
+                c = cost[i, k] + cost[k, j]
+                if not np.isfinite(c):
+                    continue
+                c += 0.5 * float(np.linalg.norm(np.cross(p[k] - p[i], p[j] - p[i])))
+                if c < cost[i, j]:
+                    cost[i, j], pick[i, j] = c, k
+    if not np.isfinite(cost[0, n - 1]):
+        return np.zeros((0, 3), np.int64)
+    tris, stack = [], [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        k = int(pick[i, j])
+        tris.append((loop[i], loop[k], loop[j]))
+        stack += [(i, k), (k, j)]
+    from ._hole_loops import _oriented
+
+    return _oriented(np.array(tris, dtype=np.int64), loop)
 
 
 def _edge_keys(tris: np.ndarray) -> np.ndarray:

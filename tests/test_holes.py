@@ -232,11 +232,10 @@ def test_cli_max_hole_size_inf_says_what_a_length_is(tmp_path, capsys) -> None:
 def test_face_map_natural_holes_filled_border_kept() -> None:
     scan = am.load_scan(am.face_map_path())
     res = fill_holes(scan, seed=0, progress=False)
-    # every hole is filled but where a fill would join two rim vertices the surface
-    # already joins (it would make an edge with three faces)
+    # every hole is filled, the 4-vertex one whose diagonal is already a mesh edge too
+    # (it takes the other diagonal: no edge gets a third face)
     refused = [h for h in res.holes if not h.filled]
-    assert res.holes_found >= 15 and len(refused) <= 1
-    assert all("reuse an edge" in h.reason for h in refused)
+    assert res.holes_found >= 15 and refused == []
     border = max(boundary_loops(scan.faces), key=len)  # the scan's outer border
     after = boundary_loops(res.mesh.faces)
     assert any(set(lp.tolist()) == set(border.tolist()) for lp in after)
@@ -447,3 +446,15 @@ def test_the_protocol_tells_notches_by_the_traced_borders_on_request() -> None:
     assert traced.n_enclosed < igl_.n_enclosed
     assert not np.any(traced.enclosed & ~igl_.enclosed)
     assert not np.any(parts.enclosed & ~traced.enclosed)
+
+
+def test_a_small_loop_takes_the_chords_the_mesh_lacks() -> None:
+    from asrbf_mesh._holes import _KEY, _chords_avoiding
+
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    loop = np.array([0, 1, 2, 3])
+    known = np.array([1 * _KEY + 3])  # the diagonal 1-3 is already a mesh edge
+    t = _chords_avoiding(loop, v, known)
+    assert len(t) == 2 and all({0, 2} <= set(tri.tolist()) for tri in t)
+    both = np.array([1 * _KEY + 3, 0 * _KEY + 2])  # no diagonal left: nothing
+    assert len(_chords_avoiding(loop, v, both)) == 0
