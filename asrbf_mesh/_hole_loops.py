@@ -168,9 +168,8 @@ def fill_loop(loop: np.ndarray, points: np.ndarray, spacing: float,
     axes = vt[:2]
     normal = vt[2]
     q = (rim - centre) @ axes.T
-    if np.unique(np.round(q / max(spacing, 1e-300), 6), axis=0).shape[0] < len(q):
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), "rim points coincide in its plane"
-    if disk or segments_cross(q):
+    coincide = np.unique(np.round(q / max(spacing, 1e-300), 6), axis=0).shape[0] < len(q)
+    if disk or coincide or segments_cross(q):  # the plane cannot hold the rim: a disk can
         return _fill_by_disk(loop, rim)
     n = len(q)
     seg = np.column_stack([np.arange(n), np.roll(np.arange(n), -1)])
