@@ -42,6 +42,14 @@ _EXPORTS: dict[str, str] = {
     "FillResult": "_holes",
     "HoleInfo": "_holes",
     "fill_holes": "_holes",
+    "GridFillResult": "_grid_fill",
+    "GridHoleInfo": "_grid_fill",
+    "fill_grid": "_grid_fill",
+    "RangeGrid": "_range",
+    "read_range": "_range",
+    "write_like": "_range_write",
+    "LasMeta": "_lidar",
+    "read_las": "_lidar",
     "face_map_path": "_io",
     "load_scan": "_io",
     "save_mesh": "_io",
@@ -84,15 +92,19 @@ if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on d
         HeightFieldWarning,
         to_height_field,
     )
+    from ._grid_fill import GridFillResult, GridHoleInfo, fill_grid
     from ._holes import FillResult, HoleInfo, fill_holes
     from ._io import face_map_path, load_scan, save_mesh
     from ._learn import LearnedState, NeuronCapWarning, learn
+    from ._lidar import LasMeta, read_las
     from ._lod import LodLevel, lod_set
     from ._mesh import Mesh, Scan
     from ._network import FitInfo, FitLog, Network, NeuronStats
     from ._outliers import OutlierWarning, isolated_points
     from ._piece import Piece
     from ._piece_map import PieceMap
+    from ._range import RangeGrid, read_range
+    from ._range_write import write_like
     from ._segment import Segmentation, segment
     from ._stream import block_order, fit_stream
     from ._surface import reconstruct
