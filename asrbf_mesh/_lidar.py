@@ -289,19 +289,25 @@ def _crs(header: Any) -> tuple[Any, tuple[VlrRecord, ...]]:
 # --------------------------------------------------------------------------- filters
 
 
+def _codes(values: Any, name: str, item: str, lo: int, hi: int,
+           expected: str) -> tuple[int, ...]:
+    """Sorted distinct ints in [lo, hi] from an int or an iterable of them; ConfigError."""
+    if isinstance(values, (int, np.integer)) and not isinstance(values, bool):
+        values = (values,)
+    try:
+        codes = tuple(sorted({check_int(c, f"a {item}", lo, hi) for c in values}))
+    except TypeError:
+        raise ConfigError(f"{name} must be {expected}, got {values!r}") from None
+    if not codes:
+        raise ConfigError(f"{name} is empty: give at least one {item}, or None for all")
+    return codes
+
+
 def _check_classes(classes: Iterable[int] | None) -> tuple[int, ...] | None:
     if classes is None:
         return None
-    if isinstance(classes, (int, np.integer)) and not isinstance(classes, bool):
-        classes = (classes,)
-    try:
-        codes = tuple(sorted({check_int(c, "a class code", 0, 255) for c in classes}))
-    except TypeError:
-        raise ConfigError(f"classes must be an iterable of class codes (0-255), "
-                          f"got {classes!r}") from None
-    if not codes:
-        raise ConfigError("classes is empty: give at least one class code, or None for all")
-    return codes
+    return _codes(classes, "classes", "class code", 0, 255,
+                  "an iterable of class codes (0-255)")
 
 
 def _check_returns(returns: str | Iterable[int] | None) -> str | tuple[int, ...] | None:
@@ -312,16 +318,8 @@ def _check_returns(returns: str | Iterable[int] | None) -> str | tuple[int, ...]
             raise ConfigError(f"returns must be one of {', '.join(RETURN_FILTERS)} or return "
                               f"numbers, got {returns!r}")
         return returns
-    if isinstance(returns, (int, np.integer)) and not isinstance(returns, bool):
-        returns = (returns,)
-    try:
-        numbers = tuple(sorted({check_int(r, "a return number", 1, 15) for r in returns}))
-    except TypeError:
-        raise ConfigError(f"returns must be 'first', 'last', 'single' or return numbers, "
-                          f"got {returns!r}") from None
-    if not numbers:
-        raise ConfigError("returns is empty: give return numbers, or None for all")
-    return numbers
+    return _codes(returns, "returns", "return number", 1, 15,
+                  "'first', 'last', 'single' or return numbers")
 
 
 def _return_mask(pts: Any, returns: str | tuple[int, ...]) -> np.ndarray:
