@@ -150,6 +150,24 @@ def _griddata(z: np.ndarray, disks: list[tuple[np.ndarray, float]], method: str)
     return out
 
 
+def _fill_with(m: str, holed: RangeGrid, seed: int, nodata: np.ndarray, rmax: float,
+               disks: list, cv_unit: float) -> tuple[np.ndarray, object, float]:
+    """Fill ``holed`` by method ``m``: the filled z, our GridFillResult (ours) and seconds."""
+    z = holed.z
+    t0 = time.perf_counter()
+    got = None
+    if m == "ours":
+        got = fill_grid(holed, seed=seed)
+        filled = got.z_filled
+    elif m == "gdal":
+        filled = _gdal(z, nodata, rmax)
+    elif m in ("ns", "telea"):
+        filled = _cv(z, nodata, m, unit=cv_unit)
+    else:
+        filled = _griddata(z, disks, m)
+    return filled, got, time.perf_counter() - t0
+
+
 def run_seed(grid: RangeGrid, seed: int, methods: tuple[str, ...]
              ) -> dict[str, tuple[float, float, str]]:
     """``{method: (rms % of range, seconds, note)}`` for one seed's voids."""
@@ -164,23 +182,12 @@ def run_seed(grid: RangeGrid, seed: int, methods: tuple[str, ...]
     rmax = max(r for _, r in disks)
     res = {}
     for m in methods:
-        note = ""
-        t0 = time.perf_counter()
         try:
-            if m == "ours":
-                got = fill_grid(holed, seed=seed)
-                filled = got.z_filled
-                note = f"fit {got.fit_seconds:.2f}s"
-            elif m == "gdal":
-                filled = _gdal(z, voids, rmax)
-            elif m in ("ns", "telea"):
-                filled = _cv(z, voids, m)
-            else:
-                filled = _griddata(z, disks, m)
+            filled, got, sec = _fill_with(m, holed, seed, voids, rmax, disks, 1.0)
         except ImportError as exc:
             res[m] = (float("nan"), float("nan"), f"missing: {exc.name}")
             continue
-        sec = time.perf_counter() - t0
+        note = f"fit {got.fit_seconds:.2f}s" if got is not None else ""
         err = filled[voids] - truth[voids]
         if not np.all(np.isfinite(err)):
             note += f" {int((~np.isfinite(err)).sum())} cells unfilled"
@@ -328,25 +335,17 @@ def run_frame_seed(grid: RangeGrid, seed: int, methods: tuple[str, ...]) -> dict
     res: dict = {"disks": [(r, c) for _, r, c in disks], "n": [int(d.sum()) for d, _, _ in disks],
                  "rim_spread": [_rim_spread(truth, d) for d, _, _ in disks]}
     for m in methods:
-        note = ""
-        t0 = time.perf_counter()
-        try:
-            if m == "ours":
-                got = fill_grid(holed, seed=seed)
-                filled = got.z_filled
-                note = f"fit {got.fit_seconds:.2f}s"
-                res["sides"] = [_hole_side(got, c, r) for _, r, c in disks]
-            elif m == "gdal":
-                filled = _gdal(z, nodata, rmax)
-            elif m in ("ns", "telea"):
-                filled = _cv(z, nodata, m, unit=1000.0)  # millimetres: see the docstring
-            else:
-                filled = _griddata(z, [(d, r) for d, r, _ in disks], m)
+        try:  # OpenCV in millimetres: see the module docstring
+            filled, got, sec = _fill_with(m, holed, seed, nodata, rmax,
+                                          [(d, r) for d, r, _ in disks], 1000.0)
         except ImportError as exc:
             res[m] = None
             res[f"{m}_note"] = f"missing: {exc.name}"
             continue
-        sec = time.perf_counter() - t0
+        note = ""
+        if got is not None:
+            note = f"fit {got.fit_seconds:.2f}s"
+            res["sides"] = [_hole_side(got, c, r) for _, r, c in disks]
         rms, sq, bad = [], 0.0, 0
         for d, _, _ in disks:
             err = 1000.0 * (filled[d] - truth[d])
