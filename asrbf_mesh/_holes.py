@@ -11,10 +11,13 @@ between two parts of the scan), is filled up to its mouth; the mouth stays open.
 Each hole selected by size is filled without touching the scan: new vertices
 inside the hole at the scan's own spacing, a constrained triangulation in xy
 (``triangle``, with no extra vertex on the hole's boundary so the rim edges are
-shared exactly), depths from the network's low-frequency substrate (its neurons at
-least as wide as the hole), and the scan's residual ``z - f`` around the rim carried
-across the hole by a thin-plate spline, so there is no step at the seam and the
-slope and curvature of the surroundings continue into the fill.
+shared exactly), depths from a thin-plate spline of the scan points around the rim,
+fitted over the ring's own best-fit plane; where that plane is seen too obliquely or
+the ring is too curved for one, from the network's low-frequency substrate (its
+neurons at least as wide as the hole) plus the scan's residual ``z - f`` around the rim
+carried across the hole by a thin-plate spline (:mod:`asrbf_mesh._hole_patch`). Either
+way there is no step at the seam, and the slope and curvature of the surroundings
+continue into the fill.
 
 Where the surface folds over itself (an occlusion: an ear in front of the head), a
 hole's rim runs over two layers of surface; each layer is then filled on its own, up
