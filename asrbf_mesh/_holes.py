@@ -361,17 +361,19 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         this length in scan units, or a percentage of the scan's bounding-box
         diagonal such as ``"5%"``. Default: every hole.
     blend : {"thin-plate", "harmonic"}
-        How the scan's residual ``z - f`` is carried across the hole: a thin-plate
-        spline of the residuals of the scan points around the rim, within 6 spacings
-        or a quarter of the hole's size (default), or a harmonic interpolation of the
-        rim residuals alone (C0 only).
+        ``"thin-plate"`` (default): a thin-plate spline of the scan points within
+        max(6 spacings, 0.18 x the hole size) of the rim, over the ring's own
+        best-fit plane, or, where that plane does not suit, the network's substrate
+        plus a thin plate of the residual ``z - f`` in the view plane;
+        ``"harmonic"``: the substrate plus a harmonic interpolation of the rim
+        residuals alone (C0 only).
     lowpass_rel : float or None
-        Over a hole, use only the neurons at least this many times as wide as the
-        hole (default 1: the network's low-frequency substrate); ``None`` keeps every
-        neuron. Narrow neurons fit the data around a hole, and their tails sag into
-        it: on punched holes of the face map the full network filled with an RMS error
-        of 0.49 % of the diagonal (harmonic blend) and 0.33 % (thin plate), the
-        substrate with the thin plate 0.056 % (BENCHMARKS.md, hole filling).
+        Where the substrate is used, only the neurons at least this many times as
+        wide as the hole (default 1: the network's low-frequency substrate); ``None``
+        keeps every neuron. Narrow neurons fit the data around a hole, and their tails
+        sag into it: on punched holes of the face map the full network filled with an
+        RMS error of 0.49 % of the diagonal (harmonic blend) and 0.33 % (thin plate),
+        the substrate with the thin plate 0.056 % (BENCHMARKS.md, hole filling).
     seed : int
         Seed of the fit when ``net`` is omitted.
     progress : bool, optional
