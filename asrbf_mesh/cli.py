@@ -448,10 +448,12 @@ def _fill_holes_options(h: argparse.ArgumentParser, full: bool = True) -> None:
                    help="fill only holes up to this size: a length in scan units or a "
                         "percentage of the bounding-box diagonal, e.g. 5%% [default: all]")
     h.add_argument("--blend", choices=BLENDS, default="thin-plate",
-                   help="how the scan's residual z - f crosses the hole [default: thin-plate]")
+                   help="thin-plate: a thin plate of the points around the hole over their "
+                        "own plane (the network's substrate where that plane does not suit); "
+                        "harmonic: substrate + harmonic rim residuals [default: thin-plate]")
     h.add_argument("--lowpass-rel", type=float, default=1.0,
-                   help="over a hole use only neurons at least this many times as wide as "
-                        "the hole; 0 keeps every neuron [default: 1]")
+                   help="where the substrate fills a hole, only neurons at least this many "
+                        "times as wide as the hole; 0 keeps every neuron [default: 1]")
     h.add_argument("--mask", help="gridded input: also write a mask image of the filled "
                                   "cells (uint8, 255 = filled)")
     _add_pieces(h, " (for the fit made here)")
