@@ -334,13 +334,18 @@ def _run(client: Any, jobs: Sequence[Job], todo: list[int],
     """Run the jobs ``todo`` with one task in flight per worker; return the restarts."""
     from distributed import as_completed
 
-    n_workers = max(1, len(client.scheduler_info()["workers"]))
+    names = [w.get("name") for w in client.scheduler_info()["workers"].values()]
+    n_workers = max(1, len(names))
     restarts = 0
     runs: dict[str, int] = {}
     pending = iter(todo)
     futures = {}
     for i in pending:
-        futures[client.submit(run_job, jobs[i], pure=False)] = i
+        # one first task per worker, by name: left to the scheduler, a busy machine could
+        # queue two first tasks on one worker (one process running two tasks)
+        name = names[len(futures)] if len(futures) < len(names) else None
+        where = {} if name is None else {"workers": [name], "allow_other_workers": True}
+        futures[client.submit(run_job, jobs[i], pure=False, **where)] = i
         if len(futures) >= n_workers:
             break
     queue = as_completed(list(futures))
