@@ -89,32 +89,39 @@ def load_tile() -> RangeGrid:
     return read_grid_array(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))
 
 
-def cut_voids(z: np.ndarray, seed: int) -> list[tuple[np.ndarray, float]]:
-    """Masks and radii (cells) of ``N_VOIDS`` non-overlapping disks at valid centres."""
+def _place_disks(shape: tuple[int, int], n: int, rel: tuple[float, float], scale: float,
+                 seed: int, accept, tries: int) -> list[tuple[float, float, float]]:
+    """``n`` disks ``(row, col, radius)``: radius ``U(*rel) * scale``, centre uniform over
+    the grid, 2 cells inside its border and from every other disk, and ``accept``-ed."""
     rng = np.random.default_rng(seed)
-    H, W = z.shape
-    rr, cc = np.mgrid[:H, :W]
-    taken = np.zeros((H, W), dtype=bool)
+    H, W = shape
     placed: list[tuple[float, float, float]] = []
-    out = []
-    tries = 0
-    while len(out) < N_VOIDS:
-        tries += 1
-        if tries > 10_000:
-            raise RuntimeError("cannot place the voids")
-        r = rng.uniform(0.03, 0.06) * max(H, W)
+    for _ in range(tries):
+        if len(placed) == n:
+            return placed
+        r = rng.uniform(*rel) * scale
         cy, cx = rng.uniform(0, H), rng.uniform(0, W)
-        if not np.isfinite(z[int(cy), int(cx)]):
-            continue
         if min(cy, cx, H - 1 - cy, W - 1 - cx) < r + 2:  # open to the border: no hole
             continue
         if any(np.hypot(cy - y, cx - x) < r + q + 2 for y, x, q in placed):
             continue
-        disk = (rr - cy) ** 2 + (cc - cx) ** 2 <= r * r
-        placed.append((cy, cx, r))
-        taken |= disk
-        out.append((disk, r))
-    return out
+        if accept(cy, cx, r):
+            placed.append((cy, cx, r))
+    if len(placed) < n:
+        raise RuntimeError(f"cannot place {n} disks in {tries:,} tries")
+    return placed
+
+
+def _disk_mask(shape: tuple[int, int], cy: float, cx: float, r: float) -> np.ndarray:
+    rr, cc = np.mgrid[:shape[0], :shape[1]]
+    return (rr - cy) ** 2 + (cc - cx) ** 2 <= r * r
+
+
+def cut_voids(z: np.ndarray, seed: int) -> list[tuple[np.ndarray, float]]:
+    """Masks and radii (cells) of ``N_VOIDS`` non-overlapping disks at valid centres."""
+    disks = _place_disks(z.shape, N_VOIDS, (0.03, 0.06), max(z.shape), seed,
+                         lambda cy, cx, r: bool(np.isfinite(z[int(cy), int(cx)])), 10_000)
+    return [(_disk_mask(z.shape, cy, cx, r), r) for cy, cx, r in disks]
 
 
 def _gdal(z: np.ndarray, voids: np.ndarray, radius: float) -> np.ndarray:
@@ -275,34 +282,17 @@ def tum_frames(folder: Path) -> dict[str, RangeGrid]:
 
 def cut_disks(z: np.ndarray, seed: int) -> list[tuple[np.ndarray, float, tuple[float, float]]]:
     """``N_DISKS`` disk masks in valid regions: (mask, radius px, (row, col) centre)."""
-    rng = np.random.default_rng(seed)
-    H, W = z.shape
     valid = np.isfinite(z)
-    placed: list[tuple[float, float, float]] = []
-    out = []
-    tries = 0
-    while len(out) < N_DISKS:
-        tries += 1
-        if tries > 100_000:
-            raise RuntimeError("cannot place the disks")
-        r = rng.uniform(0.02, 0.05) * 640
-        cy, cx = rng.uniform(0, H), rng.uniform(0, W)
-        R = r + 2  # the disk and its 2-pixel margin
-        if cy - R < 0 or cx - R < 0 or cy + R > H - 1 or cx + R > W - 1:
-            continue
-        if any(np.hypot(cy - y, cx - x) < r + q + 2 for y, x, q in placed):
-            continue
+
+    def all_valid(cy: float, cx: float, r: float) -> bool:  # the disk and a 2-pixel margin
+        R = r + 2
         y0, y1 = int(np.floor(cy - R)), int(np.ceil(cy + R)) + 1
         x0, x1 = int(np.floor(cx - R)), int(np.ceil(cx + R)) + 1
         rr, cc = np.mgrid[y0:y1, x0:x1]
-        d2 = (rr - cy) ** 2 + (cc - cx) ** 2
-        if not np.all(valid[y0:y1, x0:x1][d2 <= R * R]):
-            continue
-        disk = np.zeros((H, W), dtype=bool)
-        disk[y0:y1, x0:x1] = d2 <= r * r
-        placed.append((cy, cx, r))
-        out.append((disk, r, (cy, cx)))
-    return out
+        return bool(np.all(valid[y0:y1, x0:x1][(rr - cy) ** 2 + (cc - cx) ** 2 <= R * R]))
+
+    disks = _place_disks(z.shape, N_DISKS, (0.02, 0.05), 640, seed, all_valid, 100_000)
+    return [(_disk_mask(z.shape, cy, cx, r), r, (cy, cx)) for cy, cx, r in disks]
 
 
 def _hole_side(res: GridFillResult, centre: tuple[float, float], r: float) -> str:
