@@ -26,7 +26,8 @@ from scipy.spatial import cKDTree
 from . import _holes_kernels as _hk
 from ._hole_patch import away_from, grid_samples, triangulate
 
-__all__ = ["open_loops", "outer_loops", "boundary_cycles", "fill_loop", "segments_cross"]
+__all__ = ["open_loops", "outer_loops", "split_loops", "boundary_cycles", "fill_loop",
+           "segments_cross"]
 
 
 def boundary_cycles(faces: np.ndarray) -> list[np.ndarray]:
@@ -73,18 +74,20 @@ def boundary_cycles(faces: np.ndarray) -> list[np.ndarray]:
     return cycles
 
 
-def open_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
-    """Boundary loops of a mesh that are not the outer border of their connected part.
+def split_loops(faces: np.ndarray, n_vertices: int, loops: list[np.ndarray] | None = None
+                ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Split boundary loops into the outer borders of the mesh's connected parts and the rest.
 
-    The outer border of a part is its longest loop (by vertex count). Loops are ordered
-    vertex index arrays, largest first.
+    The outer border of a part is its longest loop (by vertex count). ``loops`` defaults
+    to :func:`boundary_cycles`. Returns the outer borders in ``loops`` order and the other
+    loops, largest first.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    loops = boundary_cycles(faces)
+    loops = boundary_cycles(faces) if loops is None else loops
     if not loops:
-        return []
+        return [], []
     a = faces.ravel()
     b = faces[:, [1, 2, 0]].ravel()
     graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)),
@@ -97,7 +100,16 @@ def open_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
             longest[p] = i
     outer = set(longest.values())
     rest = [loop for i, loop in enumerate(loops) if i not in outer]
-    return sorted(rest, key=len, reverse=True)
+    return [loops[i] for i in sorted(outer)], sorted(rest, key=len, reverse=True)
+
+
+def open_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
+    """Boundary loops of a mesh that are not the outer border of their connected part.
+
+    The outer border of a part is its longest loop (by vertex count). Loops are ordered
+    vertex index arrays, largest first.
+    """
+    return split_loops(faces, n_vertices)[1]
 
 
 def segments_cross(q: np.ndarray) -> bool:
@@ -129,8 +141,7 @@ def segments_cross(q: np.ndarray) -> bool:
 
 def outer_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
     """Return the longest boundary cycle of each connected part: the outer borders."""
-    inner = {tuple(lp.tolist()) for lp in open_loops(faces, n_vertices)}
-    return [lp for lp in boundary_cycles(faces) if tuple(lp.tolist()) not in inner]
+    return split_loops(faces, n_vertices)[0]
 
 
 def fill_loop(loop: np.ndarray, points: np.ndarray, spacing: float,

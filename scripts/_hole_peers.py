@@ -62,7 +62,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from asrbf_mesh._hole_loops import boundary_cycles
+from asrbf_mesh._hole_loops import boundary_cycles, split_loops
 from asrbf_mesh._mesh import Mesh, Scan
 
 __all__ = ["PEERS", "REASONS", "meshfix", "meshlab_close_holes", "vtk_fill_holes",
@@ -168,24 +168,7 @@ def _simple(cycle: np.ndarray) -> list[np.ndarray]:
 
 def _loops(f: np.ndarray, n_vertices: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """(outer borders, holes): simple boundary loops; the longest of each part is outer."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    loops = [s for c in boundary_cycles(f) for s in _simple(c)]
-    if not loops:
-        return [], []
-    a, b = f.ravel(), f[:, [1, 2, 0]].ravel()
-    graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)),
-                       shape=(n_vertices, n_vertices))
-    _, part = connected_components(graph, directed=False)
-    longest: dict[int, int] = {}
-    for i, loop in enumerate(loops):
-        q = int(part[loop[0]])
-        if q not in longest or len(loop) > len(loops[longest[q]]):
-            longest[q] = i
-    outer = set(longest.values())
-    return ([loops[i] for i in sorted(outer)],
-            sorted((lp for i, lp in enumerate(loops) if i not in outer), key=len, reverse=True))
+    return split_loops(f, n_vertices, [s for c in boundary_cycles(f) for s in _simple(c)])
 
 
 def _longest_loop(f: np.ndarray) -> np.ndarray | None:
