@@ -15,37 +15,41 @@ already tells where data is missing, so :func:`fill_grid` skips the mesh machine
   seam and the slope and curvature of the surroundings carry into the fill;
 * **depth-edge shadows** (depth images only). A Kinect-type sensor leaves no data beside
   the near side of a depth edge: the hole belongs to the far surface, which continues
-  behind the near object. When a hole's ring of depths is bimodal, i.e. its sorted depths
-  have a gap wider than the largest step the grid's jump rule (:data:`~asrbf_mesh._range.
-  DEFAULT_JUMP` times the lateral footprint of a diagonal pixel edge, ``Z hypot(1/fx,
-  1/fy)``) allows between two neighbouring cells, so the ring cannot be one jump-free
-  surface, the ring is split at that gap and the hole is filled from the far side's
-  cells alone, without the substrate (the network smooths across the edge, so near the
-  edge it holds a blend of the two surfaces, as at a fold in the mesh filler): a thin
-  plate through the far ring's depths, extrapolated under the near surface's silhouette.
-  The report says ``side="far"`` for such holes.
+  behind the near object. When the depths of a hole's rim (the valid cells touching
+  it) are bimodal, i.e. their sorted values have a gap wider than the largest step the
+  grid's jump rule (:data:`~asrbf_mesh._range.DEFAULT_JUMP` times the lateral footprint
+  of a diagonal pixel edge, ``Z hypot(1/fx, 1/fy)``) allows between two neighbouring
+  cells, the ring is split at that gap and the hole is filled from the far side's cells
+  alone, without the substrate (the network smooths across the edge): a thin plate
+  through the far ring's depths, extrapolated under the near surface's silhouette
+  (``side="far"``). The hole's cells inside the convex hull of the near side's rim cells,
+  where the near surface itself runs into the hole (a hole across an object's edge), are
+  filled from the near side's ring (``side="both"``). A fill that fails (behind the
+  camera, beyond twice its ring's range) becomes a harmonic membrane of the values
+  around the hole (``side="membrane"``).
 
-Cell positions: an elevation grid's cell centres and a depth image's pixels without
-intrinsics have fixed world (x, y), so one evaluation gives the depth. A depth pixel with
-intrinsics lies on its viewing ray, whose (x, y) depends on the unknown depth: the fill
-solves ``depth = F(x(depth), y(depth))`` by fixed-point iteration (it contracts where the
-surface is not grazing to the ray: ``|grad F . ray| < 1``).
+Cell positions: an elevation grid's cell centres and a depth image's pixels have fixed
+(x, y) in the frame the fill works in: a depth image is fitted and filled over its pixels
+even with intrinsics (sizes and ``max_hole_size`` stay in world units). Only with a given
+network fitted in metric camera coordinates does a pixel's (x, y) depend on its unknown
+depth: the fill then solves ``depth = F(x(depth), y(depth))`` by fixed-point iteration
+(it contracts where the surface is not grazing to the ray: ``|grad F . ray| < 1``).
 
 Without a network the grid's valid cells are fitted here, as ``fit(grid.to_scan())``:
 the triangles feed the piece segmentation; on the SRTM tile of ``scripts/bench_range.py``
 (138k cells) it gave the same network as the faceless ``Scan(grid.points()[0])`` (same
 neurons, same fill) in 7.6 s instead of 10.8 s, and 0.30-0.49 s instead of 0.36-0.50 s
-on the 10k-cell sub-grid. Only the substrate of the network is used in a hole, never
+on a 10k-cell sub-grid. Only the substrate of the network is used in a hole, never
 its fine neurons, so a large grid is fitted on a regular sub-grid (``_FIT_MAX_CELLS``).
 
 Measured on that benchmark (6 voids of 3-6 % of the tile's side per seed, seeds 0-9):
 the fill's RMS is 7.5 % of the elevation range on average against 8.8 % for GDAL
 FillNodata and 9.3-10.8 % for OpenCV inpainting and scipy ``griddata``, lowest on 9 of
-10 seeds, in 0.5-0.9 s with the fit. There the voids (2-5 km) are wider than nearly all
-neurons of the rough terrain, the substrate is almost flat, and the fill is in effect
-the thin plate of the ring: without the substrate the RMS changes in the third digit;
-with the whole network instead (every neuron, fitted on 5k cells) it is worse on 6 of
-10 seeds and on average (8.5 %).
+10 seeds, in 0.15-0.5 s with the fit (5,000-cell sub-grid). There the voids (2-5 km)
+are wider than nearly all neurons of the rough terrain, the substrate is almost flat,
+and the fill is in effect the thin plate of the ring: without the substrate the RMS
+changes in the third digit; with the whole network instead (every neuron, fitted on 5k
+cells) it is worse on 6 of 10 seeds and on average (8.5 %).
 """
 
 from __future__ import annotations
