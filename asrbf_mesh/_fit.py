@@ -24,7 +24,7 @@ from ._learn import MIN_POINTS, fit_info, learn_polished, polish_kind, residuals
 from ._mesh import Mesh
 from ._network import FitInfo, Network
 from ._outliers import OutlierWarning, describe_isolated, isolated_points
-from ._pieces import learn_pieces
+from ._pieces import TAIL_PRUNE, learn_pieces, refine_tails
 from ._segment import Segmentation, segment
 from ._validate import check_choice, check_points, check_seed
 from ._version import __version__
@@ -138,7 +138,10 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     polish = polish_kind(hf.fold, cfg.polish)
     common = (source, source_hash(points), int(seed), n_stray or None)
     if seg is None or seg.n_pieces == 1 or (pieces == "auto" and _scattered(seg)):
-        return _fit_single(hf, cfg, polish, seed, progress, order, t0, *common)
+        # the paper's single network (pieces=1) is learned and polished as it was; the
+        # default model, one piece or scattered, also gets its tails refined
+        return _fit_single(hf, cfg, polish, seed, progress, order, t0, *common,
+                           refine=pieces != "1")
     return _fit_pieces(hf, seg, cfg, polish, seed, progress, t0, *common)
 
 
@@ -177,15 +180,25 @@ def _segmentation(pieces: str | Segmentation, points: np.ndarray, faces: np.ndar
 
 def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
                 progress: bool | None, order: Any, t0: float, source: str | None, sha: str,
-                seed_out: int, outliers: int | None) -> Network:
-    learned, pr, (a0, centers, widths, weights), polish_seconds = learn_polished(
-        hf, cfg, polish, seed=seed, progress=progress, order=order)
+                seed_out: int, outliers: int | None, *, refine: bool = False) -> Network:
+    refine = refine and polish != "none"
+    learned, pr, params, polish_seconds = learn_polished(
+        hf, cfg, polish, seed=seed, progress=progress, order=order,
+        prune_below=TAIL_PRUNE * cfg.error_threshold if refine else 0.0)
+    added = 0
+    if refine:
+        tr = time.perf_counter()
+        params, added = refine_tails(hf, cfg, *params, learned.d_min, pr)
+        polish_seconds += time.perf_counter() - tr
+    a0, centers, widths, weights = params
     net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)
     res = residuals(net, hf)
     abs_mm = np.abs(res) * hf.frame.scale[2]
     info = fit_info(hf.n_points, net, source, sha, seed_out, hf.spacing, learned, pr,
                     float(np.mean(np.abs(res))), float(abs_mm.mean()), float(abs_mm.std()),
-                    polish_seconds, time.perf_counter() - t0, outliers=outliers)
+                    polish_seconds, time.perf_counter() - t0, outliers=outliers,
+                    weak_pruned=len(learned.widths) - len(widths) + added,
+                    tail_neurons=added)
     return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info.to_dict())
 
 
@@ -202,5 +215,7 @@ def _fit_pieces(hf: HeightField, seg: Segmentation, cfg: FitConfig, polish: str,
         error_std=float(abs_mm.std()), learn_seconds=got.learn_seconds,
         polish_seconds=got.polish_seconds, fit_seconds=time.perf_counter() - t0,
         us_per_step=1e6 * got.learn_seconds / max(got.steps, 1), version=__version__,
-        outliers=outliers, n_pieces=len(got.pieces))
+        outliers=outliers, n_pieces=len(got.pieces),
+        weak_pruned=sum(p.info.get("weak_pruned", 0) for p in got.pieces),
+        tail_neurons=sum(p.info.get("tail_neurons", 0) for p in got.pieces))
     return Network.from_pieces(got.pieces, hf.frame, cfg, info.to_dict(), got.piece_map)

@@ -27,7 +27,7 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -393,9 +393,13 @@ def residuals(net: Network, hf: HeightField) -> np.ndarray:
 
 def learn_polished(hf: HeightField, cfg: FitConfig, polish: str, *, seed: int,
                    progress: bool | None = None,
-                   order: Callable[[np.random.Generator], np.ndarray] | None = None
-                   ) -> tuple[LearnedState, Any, tuple, float]:
+                   order: Callable[[np.random.Generator], np.ndarray] | None = None,
+                   prune_below: float = 0.0) -> tuple[LearnedState, Any, tuple, float]:
     """Learn a height field, then run ``polish`` (``"weights"``, ``"full"`` or ``"none"``).
+
+    With a polish, ``prune_below`` > 0 first drops the learned neurons whose |weight| is
+    under it (the default model's refinement, :mod:`asrbf_mesh._pieces`); the polish's
+    ``ebar_before`` stays the learned network's E-bar.
 
     The learning and batch stage of :func:`fit`, shared with the piecewise fit
     (:mod:`asrbf_mesh._pieces`). Returns the learned state, the polish's result (None
@@ -407,6 +411,15 @@ def learn_polished(hf: HeightField, cfg: FitConfig, polish: str, *, seed: int,
     learned = learn(hf, cfg, seed=seed, progress=progress, order=order)
     a0, centers, widths, weights = learned.a0, learned.centers, learned.widths, learned.weights
     tp = time.perf_counter()
+    sequential = None  # E-bar of the learned network, when the polish starts from another
+    if prune_below > 0 and polish != "none":
+        strong = np.abs(weights) >= prune_below
+        if strong.any() and not strong.all():
+            from ._piece import Piece
+
+            f = Piece(a0, centers, widths, weights).eval_unit(hf.xy, cfg.support)[0]
+            sequential = float(np.abs(hf.z - f).mean())
+            centers, widths, weights = centers[strong], widths[strong], weights[strong]
     if polish == "weights":
         pr = polish_weights(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
                             cfg.polish_ridge)
@@ -417,4 +430,6 @@ def learn_polished(hf: HeightField, cfg: FitConfig, polish: str, *, seed: int,
         pr = None
     if pr is not None:
         a0, centers, widths, weights = pr.a0, pr.centers, pr.widths, pr.weights
+        if sequential is not None:  # before the polish: the learned network, all of it
+            pr = replace(pr, ebar_before=sequential)
     return learned, pr, (a0, centers, widths, weights), time.perf_counter() - tp

@@ -99,6 +99,8 @@ class FitInfo:
     spacing_exact: bool | None = None
     outliers: int | None = None
     n_pieces: int = 1
+    weak_pruned: int = 0
+    tail_neurons: int = 0
 
     _STREAM = ("streamed", "chunk", "mix", "spacing_exact")
 

@@ -48,6 +48,10 @@ def eval_unit(grid: tuple, uv: np.ndarray, a0: float, centers: np.ndarray, width
     return _nk.evaluate_with_gradient(uv, a0, centers, widths, weights, s, lo, h, g, start, items)
 
 
+#: The square of a width must exceed this (1e-300): evaluation divides by it.
+_WIDTH2_MIN = 1e-300
+
+
 @dataclass(frozen=True, eq=False)
 class FitLog:
     """Learning history sampled at a fixed stride (paper, Figs. 6 and 9).
@@ -138,8 +142,9 @@ class Piece:
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(w)) and np.all(np.isfinite(a))
                 and np.isfinite(a0)):
             raise ConfigError("network parameters must be finite")
-        if np.any(w <= 0):
-            raise ConfigError("widths must be positive")
+        if np.any(w <= 0) or np.any(w * w <= _WIDTH2_MIN):
+            # a width whose square underflows would divide by zero in evaluation
+            raise ConfigError("widths must be positive (and above 1e-150)")
         if self.log is not None and not isinstance(self.log, FitLog):
             raise ConfigError(f"log must be a FitLog or None, got {type(self.log).__name__}")
         if not isinstance(self.info, dict):

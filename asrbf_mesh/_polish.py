@@ -27,7 +27,7 @@ from . import _network_kernels as _nk
 from ._piece import eval_grid, eval_unit
 
 __all__ = ["PolishResult", "polish_weights", "polish_weights_blocks", "polish_full",
-           "design_matrix"]
+           "design_matrix", "extend_and_solve"]
 
 _SIGMA_RANGE = (1e-5, 2.0)
 _CENTRE_BOX = (-0.25, 1.25)
@@ -39,7 +39,12 @@ _DIRECT_MAX = 4096  # unknowns up to which the weight polish factorizes (see _so
 
 @dataclass(frozen=True)
 class PolishResult:
-    """Polished parameters (unit cube) and the mean absolute error before and after."""
+    """Polished parameters (unit cube) and the mean absolute error before and after.
+
+    The weight polish also keeps its normal equations (``ata`` = A'A and ``atz`` = A'z
+    over the columns ``[a0, a_1 .. a_K]``, without the ridge), so that neurons can be
+    added later at the cost of the rows under them only (:func:`extend_and_solve`).
+    """
 
     a0: float
     centers: np.ndarray
@@ -48,6 +53,8 @@ class PolishResult:
     ebar_before: float
     ebar_after: float
     iterations: int
+    ata: sp.csr_matrix | None = None
+    atz: np.ndarray | None = None
 
 
 def design_matrix(xy: np.ndarray, centers: np.ndarray, widths: np.ndarray,
@@ -147,8 +154,10 @@ def polish_weights_blocks(blocks: Callable[[], Iterable[tuple[np.ndarray, np.nda
     # solve for the change: (A'A + lam) dw = A'(z - A w0)
     dw = _solve_spd(ata + sp.diags(np.full(len(w0), lam)), atr)
     w = w0 + dw
+    ata = ata.tocsr()
+    atz = atr + ata @ w0
     if not np.all(np.isfinite(w)):
-        return PolishResult(a0, centers, widths, weights, before, before, 0)
+        return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
     after = 0.0
     for xy_b, z_b in blocks():
         for sl in _chunks(len(z_b)):
@@ -156,8 +165,53 @@ def polish_weights_blocks(blocks: Callable[[], Iterable[tuple[np.ndarray, np.nda
             after += float(np.abs(A @ w - z_b[sl]).sum())
     after /= n
     if after > before:
-        return PolishResult(a0, centers, widths, weights, before, before, 0)
-    return PolishResult(float(w[0]), centers, widths, w[1:].copy(), before, after, 1)
+        return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
+    return PolishResult(float(w[0]), centers, widths, w[1:].copy(), before, after, 1, ata,
+                        atz)
+
+
+def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
+                     centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
+                     support: float, ridge: float = 1e-4, *,
+                     points=None) -> PolishResult:
+    """Polish the weights again after neurons were appended to ``pr``'s, at a local cost.
+
+    ``centers``, ``widths`` and ``weights`` are ``pr``'s neurons followed by the new ones
+    (``a0`` and the weights as they stand now). ``pr``'s normal equations are extended
+    by the columns of the new neurons, computed over the points under them only (the
+    other rows are zero there), and the weights are solved as :func:`polish_weights`
+    does, pulled toward the current ones; the result is kept when it lowers the mean
+    absolute error. ``points`` is a :class:`scipy.spatial.cKDTree` of ``xy`` if one exists.
+    """
+    from scipy.spatial import cKDTree
+
+    if pr.ata is None or pr.atz is None:
+        raise ValueError("extend_and_solve needs the normal equations of a weight polish")
+    k_old = pr.ata.shape[0] - 1
+    m = len(widths) - k_old
+    w0 = np.concatenate([[a0], weights])
+    before = float(np.abs(z - _predict(xy, a0, centers, widths, weights, support)).mean())
+    if m <= 0:
+        return PolishResult(a0, centers, widths, weights, before, before, 0, pr.ata, pr.atz)
+    tree = cKDTree(xy) if points is None else points
+    rows = np.unique(np.concatenate(
+        [np.asarray(r, dtype=np.int64) for r in
+         tree.query_ball_point(centers[k_old:], support * widths[k_old:])]
+        + [np.zeros(0, np.int64)]))
+    A = design_matrix(xy[rows], centers, widths, weights, support)
+    new = A[:, 1 + k_old:]
+    cross = (A[:, :1 + k_old].T @ new).tocsr()
+    ata = sp.bmat([[pr.ata, cross], [cross.T, (new.T @ new)]], format="csr")
+    atz = np.concatenate([pr.atz, new.T @ z[rows]])
+    lam = max(ridge, _RIDGE_FLOOR) * float(ata.diagonal().mean())
+    w = w0 + _solve_spd(ata + sp.diags(np.full(len(w0), lam)), atz - ata @ w0)
+    if not np.all(np.isfinite(w)):
+        return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
+    after = float(np.abs(z - _predict(xy, w[0], centers, widths, w[1:], support)).mean())
+    if after > before:
+        return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
+    return PolishResult(float(w[0]), centers, widths, w[1:].copy(), before, after, 1, ata,
+                        atz)
 
 
 def _solve_spd(mat: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:

@@ -282,7 +282,9 @@ def test_fit_log_is_consistent(franke_net: am.Network) -> None:
     assert log.step[-1] < franke_net.info["steps"]
     assert np.all(log.n_neurons <= log.added)
     assert np.all(log.n_neurons >= 0)
-    assert log.n_neurons[-1] <= franke_net.n_neurons + log.pruned + log.diverged
+    # after learning, the default model drops weak neurons and adds tail ones
+    weak, tails = franke_net.info["weak_pruned"], franke_net.info["tail_neurons"]
+    assert log.n_neurons[-1] <= franke_net.n_neurons + log.pruned + log.diverged + weak
     assert np.all(log.rms >= 0)
     grown = log.n_neurons > 0
     assert np.all(np.isfinite(log.mean_width[grown])) and np.all(log.mean_width[grown] > 0)
@@ -290,7 +292,7 @@ def test_fit_log_is_consistent(franke_net: am.Network) -> None:
     assert log.n_neurons[0] == 0 and log.mean_width[0] == 0 and log.mean_weight[0] == 0
     for name in ("rms", "mean_width", "mean_weight"):
         assert np.all(np.isfinite(getattr(log, name)))
-    assert log.added - log.pruned - log.diverged == franke_net.n_neurons
+    assert log.added - log.pruned - log.diverged - weak + tails == franke_net.n_neurons
     # the windowed RMS error falls while the network grows
     assert log.rms[-1] < log.rms[n // 10 : n // 5].max()
 

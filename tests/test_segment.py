@@ -55,6 +55,38 @@ def test_a_cliff_splits_the_scan_in_two_pieces(cloud: bool) -> None:
     assert seg.n_cut > 0
 
 
+def spiral(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """A ramp that winds once around (19.7, 20.3), ten spacings up: a cliff along one ray
+    from the centre to the border, and one connected surface around the cliff's end."""
+    return 10.0 * (np.arctan2(y - 20.3, x - 19.7) % (2 * np.pi)) / (2 * np.pi)
+
+
+@pytest.mark.parametrize("cloud", [False, True], ids=["faces", "cloud"])
+def test_a_piece_wrapping_around_a_cliff_end_is_split(cloud: bool) -> None:
+    from asrbf_mesh._segment_kernels import jump_pairs
+
+    pts, faces = grid(spiral, 40, 40)
+    seg = am.segment(pts if cloud else am.Scan(pts, faces))
+    # the cut triangles leave one piece around the centre; rule 4 splits it
+    assert seg.n_split >= 1 and seg.to_dict()["n_split"] == seg.n_split
+    big = np.flatnonzero(~seg.small)
+    assert len(big) == 2 and seg.sizes[big].sum() >= 0.98 * len(pts)
+    for piece in big:  # no part holds a jump any more: each is a height field
+        own = pts[seg.labels == piece]
+        assert len(jump_pairs(own, 2.0, np.tan(np.radians(80.0)), 5.0)) == 0
+    unsplit = am.segment(am.Scan(pts, faces), jump_factor=1e6)  # no jump at all
+    assert unsplit.n_split == 0
+
+
+def test_the_split_spiral_fits_far_better_with_fewer_neurons() -> None:
+    pts, faces = grid(spiral, 40, 40)
+    scan = am.Scan(pts, faces)
+    single = am.fit(scan, seed=0, pieces=1, progress=False)
+    pieces = am.fit(scan, seed=0, progress=False)
+    assert pieces.n_pieces >= 2 and pieces.n_neurons < single.n_neurons
+    assert pieces.info["ebar"] < 0.3 * single.info["ebar"]
+
+
 def test_the_prototype_rule_splits_the_cliff_too() -> None:
     pts, faces = grid(cliff)
     seg = am.segment(am.Scan(pts, faces), wall_angle_deg=72.5, jump_factor=3.0)

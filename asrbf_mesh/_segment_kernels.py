@@ -1,0 +1,188 @@
+"""Compiled helper of segmentation (private): the jump pairs of a scan.
+
+A jump pair is two points close in the view plane (within ``radius``) but apart in depth
+by more than ``jump`` and steeper than ``slope``. Found through a bucket grid of cells at
+least ``radius`` wide, so each point looks at its own and the eight neighbouring cells.
+The public wrapper checks the input and bounds the grid, as numba checks no index.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: The bucket grid has at most this many cells per point (wider cells beyond).
+_CELLS_PER_POINT = 4
+
+
+def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> np.ndarray:
+    """(P, 2) int64: index pairs ``i < j`` of ``local`` ((N, 3) view frame) that are jumps.
+
+    Examples
+    --------
+    >>> pts = np.array([[0.0, 0, 0], [0.1, 0, 5], [0.2, 0, 0.01], [3.0, 0, 9]])
+    >>> jump_pairs(pts, 0.5, 5.0, 1.0).tolist()
+    [[0, 1], [1, 2]]
+    """
+    pts = np.ascontiguousarray(local, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or not np.isfinite(pts).all():
+        raise ValueError("jump_pairs: points must be a finite (N, 3) array")
+    if not (radius > 0 and np.isfinite(radius)) or len(pts) < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    lo = pts[:, :2].min(axis=0)
+    span = pts[:, :2].max(axis=0) - lo
+    # cells at least radius wide, and no more than a few per point (a far stray point
+    # would otherwise ask for a grid of billions of cells)
+    cell = max(radius, float(np.sqrt(span[0] * span[1] / (_CELLS_PER_POINT * len(pts)))),
+               float(span.max()) / 65536.0)
+    nx = int(span[0] / cell) + 1
+    ny = int(span[1] / cell) + 1
+    ij = np.minimum(((pts[:, :2] - lo) / cell).astype(np.int64), [nx - 1, ny - 1])
+    key = ij[:, 1] * nx + ij[:, 0]
+    order = np.argsort(key, kind="stable")
+    start = np.searchsorted(key[order], np.arange(nx * ny + 1))
+    args = (pts, ij, order, start, nx, ny, radius * radius, float(slope), float(jump))
+    out = np.empty((_count(*args), 2), dtype=np.int64)
+    _fill(*args, out)
+    return out[np.lexsort((out[:, 1], out[:, 0]))]
+
+
+@njit(cache=True)
+def _visit(pts, ij, order, start, nx, ny, r2, slope, jump, out, fill):
+    n = 0
+    for i in range(pts.shape[0]):
+        ci, cj = ij[i, 0], ij[i, 1]
+        for dj in range(-1, 2):
+            y = cj + dj
+            if y < 0 or y >= ny:
+                continue
+            for di in range(-1, 2):
+                x = ci + di
+                if x < 0 or x >= nx:
+                    continue
+                c = y * nx + x
+                for t in range(start[c], start[c + 1]):
+                    k = order[t]
+                    if k <= i:
+                        continue
+                    dx = pts[k, 0] - pts[i, 0]
+                    dy = pts[k, 1] - pts[i, 1]
+                    d2 = dx * dx + dy * dy
+                    if d2 > r2:
+                        continue
+                    dz = abs(pts[k, 2] - pts[i, 2])
+                    if dz > jump and dz * dz > slope * slope * d2:
+                        if fill:
+                            out[n, 0] = i
+                            out[n, 1] = k
+                        n += 1
+    return n
+
+
+@njit(cache=True)
+def _count(pts, ij, order, start, nx, ny, r2, slope, jump):
+    return _visit(pts, ij, order, start, nx, ny, r2, slope, jump,
+                  np.zeros((0, 2), dtype=np.int64), False)
+
+
+@njit(cache=True)
+def _fill(pts, ij, order, start, nx, ny, r2, slope, jump, out):
+    _visit(pts, ij, order, start, nx, ny, r2, slope, jump, out, True)
+
+
+def nearest_seed(indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray,
+                 labels: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(N,) int64: the seed nearest to each point along the graph, -1 if none reaches it.
+
+    The graph is CSR (``indptr``, ``indices``, ``weights`` >= 0, both directions of
+    each edge); a search runs only through points of the seeds' label (``labels``, and
+    the seeds must share one).
+
+    Examples
+    --------
+    >>> ip, ix = np.array([0, 1, 3, 5, 6]), np.array([1, 0, 2, 1, 3, 2])
+    >>> nearest_seed(ip, ix, np.ones(6), np.zeros(4, np.int64), np.array([0, 3])).tolist()
+    [0, 0, 3, 3]
+    """
+    n = len(indptr) - 1
+    indptr = np.ascontiguousarray(indptr, dtype=np.int64)
+    indices = np.ascontiguousarray(indices, dtype=np.int64)
+    weights = np.ascontiguousarray(weights, dtype=np.float64)
+    labels = np.ascontiguousarray(labels, dtype=np.int64)
+    seeds = np.ascontiguousarray(seeds, dtype=np.int64)
+    if (len(labels) != n or indptr[0] != 0 or indptr[-1] != len(indices)
+            or len(weights) != len(indices) or np.any(np.diff(indptr) < 0)
+            or (len(indices) and (indices.min() < 0 or indices.max() >= n))
+            or (len(seeds) and (seeds.min() < 0 or seeds.max() >= n))
+            or not np.all(weights >= 0)):
+        raise ValueError("nearest_seed: the graph, labels or seeds do not agree")
+    source = np.full(n, -1, dtype=np.int64)
+    if len(seeds) == 0:
+        return source
+    if np.any(labels[seeds] != labels[seeds[0]]):
+        raise ValueError("nearest_seed: the seeds lie in more than one piece")
+    _dijkstra(indptr, indices, weights, labels, labels[seeds[0]], seeds, source)
+    return source
+
+
+@njit(cache=True)
+def _dijkstra(indptr, indices, weights, labels, piece, seeds, source):
+    n = len(indptr) - 1
+    dist = np.full(n, np.inf)
+    cap = len(indices) + len(seeds) + 1
+    hd = np.empty(cap)  # a binary heap of (distance, point), stale entries skipped
+    hp = np.empty(cap, dtype=np.int64)
+    size = 0
+    for s in seeds:
+        if dist[s] > 0.0:
+            dist[s] = 0.0
+            source[s] = s
+            size = _push(hd, hp, size, 0.0, s)
+    while size > 0:
+        d, u = hd[0], hp[0]
+        size -= 1
+        hd[0], hp[0] = hd[size], hp[size]
+        _sift_down(hd, hp, size)
+        if d > dist[u]:
+            continue
+        for t in range(indptr[u], indptr[u + 1]):
+            v = indices[t]
+            if labels[v] != piece:
+                continue
+            nd = d + weights[t]
+            if nd < dist[v]:
+                dist[v] = nd
+                source[v] = source[u]
+                size = _push(hd, hp, size, nd, v)
+    return source
+
+
+@njit(cache=True)
+def _push(hd, hp, size, d, p):
+    i = size
+    hd[i], hp[i] = d, p
+    while i > 0:
+        parent = (i - 1) // 2
+        if hd[parent] <= hd[i]:
+            break
+        hd[parent], hd[i] = hd[i], hd[parent]
+        hp[parent], hp[i] = hp[i], hp[parent]
+        i = parent
+    return size + 1
+
+
+@njit(cache=True)
+def _sift_down(hd, hp, size):
+    i = 0
+    while True:
+        left = 2 * i + 1
+        if left >= size:
+            break
+        child = left
+        if left + 1 < size and hd[left + 1] < hd[left]:
+            child = left + 1
+        if hd[i] <= hd[child]:
+            break
+        hd[i], hd[child] = hd[child], hd[i]
+        hp[i], hp[child] = hp[child], hp[i]
+        i = child
