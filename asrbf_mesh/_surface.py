@@ -151,8 +151,12 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
             keep |= fp.touching(gx, gy)
 
     # nodes reaching past the border are moved onto the scan only with coverage "any" (up
-    # to a whole cell out); nodes past a cliff into another piece's territory always
-    snap = None if mode == "full" else (local_xy, fp, coverage == "any")
+    # to a whole cell out); nodes past a cliff into another piece's territory always. They
+    # go to samples on the scan's surface: a sample in no triangle is no surface
+    snap = None
+    if mode != "full":
+        on = local_xy if faces is None or not len(faces) else local_xy[np.unique(faces)]
+        snap = (on, fp, coverage == "any")
     mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap)
     return mesh
 

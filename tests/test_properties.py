@@ -80,10 +80,18 @@ def test_any_fit_is_finite_and_no_worse_than_a_constant(pts, scale, cfg, seed) -
     q = lo + (hi - lo) * np.random.default_rng(seed).uniform(-0.5, 1.5, (500, 2))
     assert np.all(np.isfinite(net.evaluate(q)))
     # the error is bounded: no worse than the best constant (the median) by more than
-    # a margin
+    # a margin, once a polish has solved the weights. The paper's sequential network
+    # alone (polish "none") is not bounded so: on 30 random points with narrow neurons
+    # (psi 0.31, E 0.001, one pass) it ends at twice the constant's error, before and
+    # after the piecewise model; nor where most points lie on folds and the polish is
+    # skipped (a plane 100 times steeper than wide: height_field(0, 153, 0, 0, 0) at
+    # scale (1e-6, 1e-3, 0))
+    from asrbf_mesh._learn import FOLD_NO_POLISH
+
     z = net.frame.to_unit(pts)[:, 2]
     const = float(np.mean(np.abs(z - np.median(z))))
-    assert net.info["ebar"] <= 1.5 * const + 1e-9
+    if cfg["polish"] != "none" and am.to_height_field(pts).fold <= FOLD_NO_POLISH:
+        assert net.info["ebar"] <= 1.5 * const + 1e-9
 
 
 @pytest.mark.filterwarnings("ignore::asrbf_mesh.HeightFieldWarning")
