@@ -157,8 +157,67 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     if mode != "full":
         on = local_xy if faces is None or not len(faces) else local_xy[np.unique(faces)]
         snap = (on, fp, coverage == "any")
-    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap)
+    mesh, _, vertex_piece = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap)
+    if snap is not None and net.n_pieces > 1:
+        mesh = _with_fragments(net, mesh, vertex_piece, snap[0], step)
     return mesh
+
+
+def _with_fragments(net: Network, mesh: Mesh, vertex_piece: np.ndarray, on: np.ndarray,
+                    step: float) -> Mesh:
+    """Add a patch for every piece of the scan that owns no grid cell.
+
+    A fragment narrower than a cell of a coarse grid owns no cell centre, so the grid
+    mesh drops it. Its patch: the fragment's own samples, thinned to one per grid cell
+    (all of them if that leaves fewer than three), triangulated in the view plane
+    without triangles longer than two cells, on the fragment's own network.
+    """
+    owner = net.piece_at(on)
+    missing = np.setdiff1d(np.unique(owner), np.unique(vertex_piece))
+    verts, faces, normals = [mesh.vertices], [mesh.faces], [mesh.vertex_normals]
+    n = mesh.n_vertices
+    for p in missing:
+        pts = _fragment_samples(on[owner == p], step)
+        tris = _delaunay(pts, 2.0 * step)
+        if len(tris) == 0:
+            continue
+        verts.append(net.surface_points(pts, piece=int(p)))
+        normals.append(net.normals(pts, piece=int(p)))
+        faces.append(tris + n)
+        n += len(pts)
+    if len(verts) == 1:
+        return mesh
+    return Mesh(np.vstack(verts), np.vstack(faces), vertex_normals=np.vstack(normals))
+
+
+def _fragment_samples(xy: np.ndarray, step: float) -> np.ndarray:
+    """One sample per grid cell of ``step`` (the first in index order), or all of them."""
+    xy = np.unique(xy, axis=0)
+    cell = np.floor((xy - xy.min(axis=0)) / step).astype(np.int64)
+    _, first = np.unique(cell, axis=0, return_index=True)
+    return xy[np.sort(first)] if len(first) >= 3 else xy
+
+
+def _delaunay(xy: np.ndarray, longest: float) -> np.ndarray:
+    """Return the counter-clockwise Delaunay triangles of distinct points in the plane.
+
+    None has an edge over ``longest``; there are none at all for fewer than three points
+    or points on a line (qhull is not asked).
+    """
+    from scipy.spatial import Delaunay, QhullError
+
+    if len(xy) < 3 or np.linalg.matrix_rank(xy - xy.mean(axis=0), tol=1e-12 * longest) < 2:
+        return np.zeros((0, 3), dtype=np.int64)
+    try:
+        tris = Delaunay(xy).simplices.astype(np.int64)
+    except (QhullError, ValueError):  # degenerate input qhull refuses: no patch
+        return np.zeros((0, 3), dtype=np.int64)
+    p = xy[tris]
+    edge = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
+    cross = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+             - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+    tris = np.where((cross < 0)[:, None], tris[:, [0, 2, 1]], tris)
+    return tris[(edge <= longest) & (cross != 0)]
 
 
 def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.ndarray | None,
