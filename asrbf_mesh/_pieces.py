@@ -47,6 +47,8 @@ TAIL_ROUNDS = 3
 TAIL_NOISE = 3.0
 #: Tail refinement: neurons whose polished |weight| is under this multiple of E are dropped.
 TAIL_PRUNE = 0.3
+#: Tail refinement: the data's slope at a point is a plane through this many samples.
+_SLOPE_NEIGHBOURS = 8
 #: Tail refinement: points sampled for the noise scale.
 _NOISE_SAMPLE = 4096
 #: Tail refinement: candidates looked at per round, worst first.
@@ -206,12 +208,13 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             break
         piece = Piece(a0, centers, widths, weights)
         res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
+        points = cKDTree(sub.xy) if points is None else points
         some = _across(piece, sub, res, np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE)),
-                       scale, cfg.support)
+                       scale, cfg.support, points)
         mad = float(np.median(np.abs(some - np.median(some))))
         limit = max(TAIL_FACTOR * cfg.error_threshold, TAIL_NOISE * 1.4826 * mad)
         worst = np.flatnonzero(np.abs(res) > limit)  # the error across is at most |res|
-        off = _across(piece, sub, res, worst, scale, cfg.support)
+        off = _across(piece, sub, res, worst, scale, cfg.support, points)
         worst, off = worst[off > limit], off[off > limit]
         worst = worst[np.argsort(-off, kind="stable")][:_TAIL_CANDIDATES]
         picked = worst[_spread(sub.xy[worst], d_min)]
@@ -222,7 +225,6 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         new = sub.xy[picked]
         near = np.linalg.norm(new - centers[cKDTree(centers).query(new)[1]], axis=1)
         sigma = np.maximum(cfg.psi * near, 0.5 * d_min)
-        points = cKDTree(sub.xy) if points is None else points
         a_new = _local_weights(sub.xy, res, new, sigma, cfg, points)
         centers, widths = np.vstack([centers, new]), np.r_[widths, sigma]
         weights = np.r_[weights, a_new]
@@ -259,14 +261,28 @@ def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: 
 
 
 def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
-            scale: np.ndarray, support: float) -> np.ndarray:
+            scale: np.ndarray, support: float, points) -> np.ndarray:
     """Return the error across the surface at points ``at``, not along the view.
 
     A steep point whose depth is off by 5 E may lie within E of the surface: the depth
-    error times the cosine of the slope, the slope taken in physical proportions.
+    error times the cosine of the slope, the slope taken in physical proportions. The
+    slope is the smaller of the network's and the data's (a plane through the point's
+    eight nearest samples, ``points`` their tree): a network that swings steeply where
+    the scan does not is off by its whole depth error.
     """
-    slope = piece.eval_unit(sub.xy[at], support, True)[1] * (scale[2] / scale[:2])
-    return np.abs(res[at]) / np.sqrt(1.0 + np.einsum("ij,ij->i", slope, slope))
+    if len(at) == 0:
+        return np.zeros(0)
+    ratio = scale[2] / scale[:2]
+    net = piece.eval_unit(sub.xy[at], support, True)[1] * ratio
+    k = min(_SLOPE_NEIGHBOURS, sub.n_points)
+    _, near = points.query(sub.xy[at], k=k)
+    near = near.reshape(len(at), k)
+    d = sub.xy[near] - sub.xy[near].mean(axis=1, keepdims=True)  # (M, k, 2)
+    dz = sub.z[near] - sub.z[near].mean(axis=1, keepdims=True)
+    gram = np.einsum("mki,mkj->mij", d, d) + 1e-12 * np.eye(2)
+    data = np.linalg.solve(gram, np.einsum("mki,mk->mi", d, dz)[..., None])[..., 0] * ratio
+    s2 = np.minimum(np.einsum("ij,ij->i", net, net), np.einsum("ij,ij->i", data, data))
+    return np.abs(res[at]) / np.sqrt(1.0 + s2)
 
 
 def _spread(xy: np.ndarray, radius: float) -> np.ndarray:

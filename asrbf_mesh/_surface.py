@@ -157,28 +157,40 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     if mode != "full":
         on = local_xy if faces is None or not len(faces) else local_xy[np.unique(faces)]
         snap = (on, fp, coverage == "any")
-    mesh, _, vertex_piece = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap)
+    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap)
     if snap is not None and net.n_pieces > 1:
-        mesh = _with_fragments(net, mesh, vertex_piece, snap[0], step)
+        mesh = _with_fragments(net, mesh, snap[0], gx, gy, keep)
     return mesh
 
 
-def _with_fragments(net: Network, mesh: Mesh, vertex_piece: np.ndarray, on: np.ndarray,
-                    step: float) -> Mesh:
-    """Add a patch for every piece of the scan that owns no grid cell.
+def _with_fragments(net: Network, mesh: Mesh, on: np.ndarray, gx: np.ndarray,
+                    gy: np.ndarray, keep: np.ndarray) -> Mesh:
+    """Add a patch for every piece of the scan that the grid's cells leave out.
 
-    A fragment narrower than a cell of a coarse grid owns no cell centre, so the grid
-    mesh drops it. Its patch: the fragment's own samples, thinned to one per grid cell
-    (all of them if that leaves fewer than three), triangulated in the view plane
-    without triangles longer than two cells, on the fragment's own network.
+    A fragment narrower than a cell of a coarse grid owns few cell centres or none, so
+    the grid mesh drops most of it. A piece whose samples lie mostly outside its own
+    kept cells gets a patch of those samples, thinned to one per grid cell (all of them
+    if that leaves fewer than three), triangulated in the view plane without triangles
+    longer than two cells (or two of the patch's own sample spacings, if wider), on the
+    piece's own network.
     """
+    step = float(max(gx[1] - gx[0], gy[1] - gy[0]))
     owner = net.piece_at(on)
-    missing = np.setdiff1d(np.unique(owner), np.unique(vertex_piece))
+    centres = np.stack(np.meshgrid(0.5 * (gx[:-1] + gx[1:]), 0.5 * (gy[:-1] + gy[1:])), -1)
+    cell_owner = np.where(keep, net.piece_at(centres.reshape(-1, 2)).reshape(keep.shape), -1)
+    i = np.clip(np.searchsorted(gx, on[:, 0], side="right") - 1, 0, len(gx) - 2)
+    j = np.clip(np.searchsorted(gy, on[:, 1], side="right") - 1, 0, len(gy) - 2)
+    covered = cell_owner[j, i] == owner
+    share = np.bincount(owner, covered, net.n_pieces) / np.maximum(
+        np.bincount(owner, minlength=net.n_pieces), 1)
     verts, faces, normals = [mesh.vertices], [mesh.faces], [mesh.vertex_normals]
     n = mesh.n_vertices
-    for p in missing:
-        pts = _fragment_samples(on[owner == p], step)
-        tris = _delaunay(pts, 2.0 * step)
+    for p in np.flatnonzero(share < _FRAGMENT_SHARE):
+        mine = (owner == p) & ~covered
+        if mine.sum() < 3:
+            continue
+        pts = _fragment_samples(on[mine], step)
+        tris = _delaunay(pts, 2.0 * max(step, _nn_median(pts)))
         if len(tris) == 0:
             continue
         verts.append(net.surface_points(pts, piece=int(p)))
@@ -188,6 +200,19 @@ def _with_fragments(net: Network, mesh: Mesh, vertex_piece: np.ndarray, on: np.n
     if len(verts) == 1:
         return mesh
     return Mesh(np.vstack(verts), np.vstack(faces), vertex_normals=np.vstack(normals))
+
+
+def _nn_median(xy: np.ndarray) -> float:
+    """Median distance from each point to its nearest other point (0 for one point)."""
+    from scipy.spatial import cKDTree
+
+    if len(xy) < 2:
+        return 0.0
+    return float(np.median(cKDTree(xy).query(xy, k=2)[0][:, 1]))
+
+
+#: A piece with less than this share of its samples in its own kept cells gets a patch.
+_FRAGMENT_SHARE = 0.5
 
 
 def _fragment_samples(xy: np.ndarray, step: float) -> np.ndarray:
