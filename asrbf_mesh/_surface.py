@@ -187,12 +187,12 @@ def _with_fragments(net: Network, mesh: Mesh, on: np.ndarray, gx: np.ndarray,
     n = mesh.n_vertices
     for p in np.flatnonzero(share < _FRAGMENT_SHARE):
         mine = (owner == p) & ~covered
-        if mine.sum() < 3:
+        if not mine.any():
             continue
         pts = _fragment_samples(on[mine], step)
         tris = _delaunay(pts, 2.0 * max(step, _nn_median(pts)))
-        if len(tris) == 0:
-            continue
+        if len(tris) == 0:  # a sample or a row of samples: a strip one cell wide
+            pts, tris = _ribbon(pts, step)
         verts.append(net.surface_points(pts, piece=int(p)))
         normals.append(net.normals(pts, piece=int(p)))
         faces.append(tris + n)
@@ -200,6 +200,30 @@ def _with_fragments(net: Network, mesh: Mesh, on: np.ndarray, gx: np.ndarray,
     if len(verts) == 1:
         return mesh
     return Mesh(np.vstack(verts), np.vstack(faces), vertex_normals=np.vstack(normals))
+
+
+def _ribbon(xy: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Make a strip ``width`` wide along points on a line (a square for one point).
+
+    Returns the strip's corners (2 per point, in the line's order) and its
+    counter-clockwise triangles.
+    """
+    xy = np.unique(xy, axis=0)
+    if len(xy) == 1:
+        d = np.array([1.0, 0.0])
+    else:
+        d = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)[2][0]
+    t = (xy - xy.mean(axis=0)) @ d
+    xy = xy[np.argsort(t, kind="stable")]
+    if len(xy) == 1:  # stretch one point into a square
+        xy = np.vstack([xy - 0.5 * width * d, xy + 0.5 * width * d])
+    n = np.array([-d[1], d[0]]) * (0.5 * width)
+    corners = np.empty((2 * len(xy), 2))
+    corners[0::2], corners[1::2] = xy - n, xy + n  # right and left of the line
+    k = np.arange(len(xy) - 1)
+    a, b, c, e = 2 * k, 2 * k + 2, 2 * k + 3, 2 * k + 1  # right, next right, next left, left
+    tris = np.vstack([np.c_[a, b, c], np.c_[a, c, e]]).astype(np.int64)
+    return corners, tris
 
 
 def _nn_median(xy: np.ndarray) -> float:

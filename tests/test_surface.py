@@ -259,3 +259,19 @@ def test_resolution_without_margin_is_unchanged(franke_net: am.Network) -> None:
     nx = max(int(round(span[0] / step)) + 1, 2)
     ny = max(int(round(span[1] / step)) + 1, 2)
     assert m.n_vertices == nx * ny
+
+
+def test_a_row_of_samples_becomes_a_strip_one_cell_wide() -> None:
+    from asrbf_mesh._surface import _ribbon
+
+    row = np.array([[2.0, 1.0], [0.0, 1.0], [1.0, 1.0]])
+    corners, tris = _ribbon(row, 0.5)
+    assert corners.shape == (6, 2) and tris.shape == (4, 3)
+    p = corners[tris]
+    cross = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+             - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+    assert np.all(cross > 0)  # counter-clockwise seen from +depth, as the grid's
+    assert np.allclose(np.abs(corners[:, 1] - 1.0), 0.25)  # half a width either side
+    assert 0.5 * cross.sum() == pytest.approx(2.0 * 0.5)  # the row's length times the width
+    square, two = _ribbon(np.array([[1.0, 1.0]]), 0.5)
+    assert two.shape == (2, 3) and np.ptp(square, axis=0).tolist() == [0.5, 0.5]
