@@ -201,18 +201,19 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     from scipy.spatial import cKDTree
 
     scale = np.asarray(sub.frame.scale, dtype=np.float64)
-    points = None
+    points, limit = None, 0.0
     added = 0
     for _ in range(TAIL_ROUNDS):
         if len(widths) == 0:
             break
         piece = Piece(a0, centers, widths, weights)
         res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
-        points = cKDTree(sub.xy) if points is None else points
-        some = _across(piece, sub, res, np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE)),
-                       scale, cfg.support, points)
-        mad = float(np.median(np.abs(some - np.median(some))))
-        limit = max(TAIL_FACTOR * cfg.error_threshold, TAIL_NOISE * 1.4826 * mad)
+        if points is None:  # the first round: the piece's noise scale, once
+            points = cKDTree(sub.xy)
+            sample = np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE))
+            some = _across(piece, sub, res, sample, scale, cfg.support, points)
+            mad = float(np.median(np.abs(some - np.median(some))))
+            limit = max(TAIL_FACTOR * cfg.error_threshold, TAIL_NOISE * 1.4826 * mad)
         worst = np.flatnonzero(np.abs(res) > limit)  # the error across is at most |res|
         off = _across(piece, sub, res, worst, scale, cfg.support, points)
         worst, off = worst[off > limit], off[off > limit]
