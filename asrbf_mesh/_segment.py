@@ -46,7 +46,9 @@ settings (85 degrees, 8 edges) merge two of bun090's pieces across a cliff.
 Rule 4 was added when the reconstruction's tails were traced (``scripts/bench_pieces.py``):
 bun090's 9,366-point piece held 125 such jump pairs, its worst residuals (up to 0.15 of
 the unit depth) sat on the ramp the network put across the cliff, and the mesh's 99.9th
-percentile distance to the scan was 1.5 % of the diagonal; split, 0.7 %.
+percentile distance to the scan was 1.5 % of the diagonal (0.5 % with rule 4 and the
+tail refinement of :mod:`asrbf_mesh._pieces`). A cliff of fewer than 15 pairs splits no
+piece: on the face map, shorter ones split off slivers that cost neurons and no error.
 """
 
 from __future__ import annotations
