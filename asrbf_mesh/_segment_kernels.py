@@ -41,53 +41,46 @@ def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> n
     key = ij[:, 1] * nx + ij[:, 0]
     order = np.argsort(key, kind="stable")
     start = np.searchsorted(key[order], np.arange(nx * ny + 1))
-    args = (pts, ij, order, start, nx, ny, radius * radius, float(slope), float(jump))
-    out = np.empty((_count(*args), 2), dtype=np.int64)
-    _fill(*args, out)
+    out = _pairs(pts, ij, order, start, nx, ny, radius * radius, float(slope), float(jump))
     return out[np.lexsort((out[:, 1], out[:, 0]))]
 
 
 @njit(cache=True)
-def _visit(pts, ij, order, start, nx, ny, r2, slope, jump, out, fill):
-    n = 0
-    for i in range(pts.shape[0]):
-        ci, cj = ij[i, 0], ij[i, 1]
-        for dj in range(-1, 2):
-            y = cj + dj
-            if y < 0 or y >= ny:
-                continue
-            for di in range(-1, 2):
-                x = ci + di
-                if x < 0 or x >= nx:
+def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump):
+    # two sweeps over the same pairs: the first counts, the second fills (one kernel to
+    # compile, no growing list)
+    out = np.empty((0, 2), dtype=np.int64)
+    for sweep in range(2):
+        n = 0
+        for i in range(pts.shape[0]):
+            ci, cj = ij[i, 0], ij[i, 1]
+            for dj in range(-1, 2):
+                y = cj + dj
+                if y < 0 or y >= ny:
                     continue
-                c = y * nx + x
-                for t in range(start[c], start[c + 1]):
-                    k = order[t]
-                    if k <= i:
+                for di in range(-1, 2):
+                    x = ci + di
+                    if x < 0 or x >= nx:
                         continue
-                    dx = pts[k, 0] - pts[i, 0]
-                    dy = pts[k, 1] - pts[i, 1]
-                    d2 = dx * dx + dy * dy
-                    if d2 > r2:
-                        continue
-                    dz = abs(pts[k, 2] - pts[i, 2])
-                    if dz > jump and dz * dz > slope * slope * d2:
-                        if fill:
-                            out[n, 0] = i
-                            out[n, 1] = k
-                        n += 1
-    return n
-
-
-@njit(cache=True)
-def _count(pts, ij, order, start, nx, ny, r2, slope, jump):
-    return _visit(pts, ij, order, start, nx, ny, r2, slope, jump,
-                  np.zeros((0, 2), dtype=np.int64), False)
-
-
-@njit(cache=True)
-def _fill(pts, ij, order, start, nx, ny, r2, slope, jump, out):
-    _visit(pts, ij, order, start, nx, ny, r2, slope, jump, out, True)
+                    c = y * nx + x
+                    for t in range(start[c], start[c + 1]):
+                        k = order[t]
+                        if k <= i:
+                            continue
+                        dx = pts[k, 0] - pts[i, 0]
+                        dy = pts[k, 1] - pts[i, 1]
+                        d2 = dx * dx + dy * dy
+                        if d2 > r2:
+                            continue
+                        dz = abs(pts[k, 2] - pts[i, 2])
+                        if dz > jump and dz * dz > slope * slope * d2:
+                            if sweep == 1:
+                                out[n, 0] = i
+                                out[n, 1] = k
+                            n += 1
+        if sweep == 0:
+            out = np.empty((n, 2), dtype=np.int64)
+    return out
 
 
 def nearest_seed(indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray,
