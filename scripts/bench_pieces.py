@@ -137,7 +137,8 @@ def lod_main(seeds: list[int]) -> int:
             "*surface only*: mesh → scan without the vertices over the scan's enclosed "
             "holes (the fill). "
             "QEM: fast-simplification with a free border, decimated until its binary PLY "
-            "takes the bytes of the `.asrbf` file a LOD set ships (float32, no log); the "
+            "takes the bytes of the `.asrbf` file a LOD set ships (compact: uint16 centres, "
+            "float16 widths and weights; no log); the "
             "ratio is level 0's Metro RMS over the QEM mesh's. Cells: median (worst seed).\n\n"
             + table(LOD_HEADERS, rows))
     print(body)
