@@ -148,8 +148,9 @@ def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
     """Fit a fragment too small to learn: three wide neurons by least squares, or a constant.
 
     The neurons sit on the three mutually farthest points (the first point, the point
-    farthest from it, the point farthest from both), each as wide as the fragment; a0 and
-    the weights minimize the squared error (ridge-regularized toward zero). Kept only
+    farthest from it, the point farthest from both), each as wide as the diagonal of the
+    fragment's bounding box; a0 and the weights minimize the squared error
+    (ridge-regularized toward zero). Kept only
     when they lower the fragment's mean error: one point, or points on a line where
     least squares cannot tell a slope, and fragments the constant already fits within E
     stay the constant mean.
@@ -166,7 +167,7 @@ def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
         picks.append(int(np.argmax(dist)))
         dist = np.minimum(dist, np.linalg.norm(xy - xy[picks[-1]], axis=1))
     centres = xy[picks]
-    width = float(np.linalg.norm(xy[:, None] - xy[None], axis=2).max())
+    width = float(np.linalg.norm(np.ptp(xy, axis=0)))  # the fragment's extent, in O(n)
     if len(np.unique(picks)) < 3 or not width > 0:
         return const
     pr = polish_weights(xy, z, float(z.mean()), centres, np.full(3, width), np.zeros(3),
@@ -247,11 +248,9 @@ def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: 
     """Least-squares weights of new neurons for the residual under them (ridge as the polish)."""
     from scipy.sparse import diags
 
-    from ._polish import _RIDGE_FLOOR, _solve_spd, design_matrix
+    from ._polish import _RIDGE_FLOOR, _solve_spd, design_matrix, rows_under
 
-    rows = np.unique(np.concatenate(
-        [np.asarray(r, dtype=np.int64) for r in
-         points.query_ball_point(centers, cfg.support * sigma)] + [np.zeros(0, np.int64)]))
+    rows = rows_under(points, centers, sigma, cfg.support)
     if len(rows) == 0:
         return np.zeros(len(sigma))
     A = design_matrix(xy[rows], centers, sigma, np.ones(len(sigma)), cfg.support)[:, 1:]

@@ -194,10 +194,7 @@ def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
     if m <= 0:
         return PolishResult(a0, centers, widths, weights, before, before, 0, pr.ata, pr.atz)
     tree = cKDTree(xy) if points is None else points
-    rows = np.unique(np.concatenate(
-        [np.asarray(r, dtype=np.int64) for r in
-         tree.query_ball_point(centers[k_old:], support * widths[k_old:])]
-        + [np.zeros(0, np.int64)]))
+    rows = rows_under(tree, centers[k_old:], widths[k_old:], support)
     A = design_matrix(xy[rows], centers, widths, weights, support)
     new = A[:, 1 + k_old:]
     cross = (A[:, :1 + k_old].T @ new).tocsr()
@@ -212,6 +209,16 @@ def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
         return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
     return PolishResult(float(w[0]), centers, widths, w[1:].copy(), before, after, 1, ata,
                         atz)
+
+
+def rows_under(points, centers: np.ndarray, widths: np.ndarray, support: float) -> np.ndarray:
+    """Sorted indices of the points within the truncated support of any of the neurons.
+
+    ``points`` is a :class:`scipy.spatial.cKDTree` of the points (unit square).
+    """
+    near = points.query_ball_point(centers, support * widths)
+    return np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in near]
+                                    + [np.zeros(0, np.int64)]))
 
 
 def _solve_spd(mat: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:

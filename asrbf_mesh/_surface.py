@@ -153,19 +153,23 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     # nodes reaching past the border are moved onto the scan only with coverage "any" (up
     # to a whole cell out); nodes past a cliff into another piece's territory always. They
     # go to samples on the scan's surface: a sample in no triangle is no surface
-    snap = None
+    snap = owner = None
     if mode != "full":
         on = local_xy if faces is None or not len(faces) else local_xy[np.unique(faces)]
         snap = (on, fp, coverage == "any")
-    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap)
-    if snap is not None and net.n_pieces > 1:
-        mesh = _with_fragments(net, mesh, snap[0], gx, gy, keep)
+        if net.n_pieces > 1:  # each cell's piece, for the grid mesh and its fragments
+            owner = net.piece_at(centres).reshape(keep.shape)
+    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap, owner=owner)
+    if owner is not None:
+        mesh = _with_fragments(net, mesh, on, gx, gy, np.where(keep, owner, -1))
     return mesh
 
 
 def _with_fragments(net: Network, mesh: Mesh, on: np.ndarray, gx: np.ndarray,
-                    gy: np.ndarray, keep: np.ndarray) -> Mesh:
+                    gy: np.ndarray, cell_owner: np.ndarray) -> Mesh:
     """Add a patch for every piece of the scan that the grid's cells leave out.
+
+    ``cell_owner`` holds the piece of each kept grid cell, -1 for a cell not kept.
 
     A fragment narrower than a cell of a coarse grid owns few cell centres or none, so
     the grid mesh drops most of it. A piece whose samples lie mostly outside its own
@@ -176,8 +180,6 @@ def _with_fragments(net: Network, mesh: Mesh, on: np.ndarray, gx: np.ndarray,
     """
     step = float(max(gx[1] - gx[0], gy[1] - gy[0]))
     owner = net.piece_at(on)
-    centres = np.stack(np.meshgrid(0.5 * (gx[:-1] + gx[1:]), 0.5 * (gy[:-1] + gy[1:])), -1)
-    cell_owner = np.where(keep, net.piece_at(centres.reshape(-1, 2)).reshape(keep.shape), -1)
     i = np.clip(np.searchsorted(gx, on[:, 0], side="right") - 1, 0, len(gx) - 2)
     j = np.clip(np.searchsorted(gy, on[:, 1], side="right") - 1, 0, len(gy) - 2)
     covered = cell_owner[j, i] == owner
@@ -190,7 +192,7 @@ def _with_fragments(net: Network, mesh: Mesh, on: np.ndarray, gx: np.ndarray,
         if not mine.any():
             continue
         pts = _fragment_samples(on[mine], step)
-        tris = _delaunay(pts, 2.0 * max(step, _nn_median(pts)))
+        tris = _delaunay(pts, 2.0 * max(step, sampling_spacing(pts) if len(pts) > 1 else 0.0))
         if len(tris) == 0:  # a sample or a row of samples: a strip one cell wide
             pts, tris = _ribbon(pts, step)
         verts.append(net.surface_points(pts, piece=int(p)))
@@ -224,15 +226,6 @@ def _ribbon(xy: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
     a, b, c, e = 2 * k, 2 * k + 2, 2 * k + 3, 2 * k + 1  # right, next right, next left, left
     tris = np.vstack([np.c_[a, b, c], np.c_[a, c, e]]).astype(np.int64)
     return corners, tris
-
-
-def _nn_median(xy: np.ndarray) -> float:
-    """Median distance from each point to its nearest other point (0 for one point)."""
-    from scipy.spatial import cKDTree
-
-    if len(xy) < 2:
-        return 0.0
-    return float(np.median(cKDTree(xy).query(xy, k=2)[0][:, 1]))
 
 
 #: A piece with less than this share of its samples in its own kept cells gets a patch.
@@ -271,13 +264,15 @@ def _delaunay(xy: np.ndarray, longest: float) -> np.ndarray:
 
 def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.ndarray | None,
                     *, walls: bool = True,
-                    snap: tuple[np.ndarray, Footprint, bool] | None = None
+                    snap: tuple[np.ndarray, Footprint, bool] | None = None,
+                    owner: np.ndarray | None = None
                     ) -> tuple[Mesh, np.ndarray, np.ndarray]:
     """Mesh each piece of ``net`` on the grid cells it owns, stitched by walls.
 
     ``xy`` holds the ``nx`` x ``ny`` grid nodes (row-major, local physical units) and
     ``keep`` ((ny-1, nx-1) bool, None for all) the cells to mesh. Each cell belongs to the
-    piece owning its centre (:meth:`~asrbf_mesh.Network.piece_at`); a node shared by cells
+    piece owning its centre (:meth:`~asrbf_mesh.Network.piece_at`; ``owner``, (ny-1, nx-1),
+    if the caller has it already); a node shared by cells
     of two pieces gets one vertex per piece, each on its own piece's surface. With
     ``walls``, the grid edge between two cells of different pieces becomes a wall of two
     triangles between the two pieces' vertices of its end nodes: no ramp across a depth
@@ -306,7 +301,9 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     """
     keep = np.ones((ny - 1, nx - 1), bool) if keep is None else keep
     n_nodes = nx * ny
-    if net.n_pieces == 1:
+    if owner is not None:
+        owner = np.asarray(owner, dtype=np.int64).reshape(keep.shape)
+    elif net.n_pieces == 1:
         owner = np.zeros(keep.shape, dtype=np.int64)
     else:
         centres = 0.5 * (xy.reshape(ny, nx, 2)[:-1, :-1] + xy.reshape(ny, nx, 2)[1:, 1:])
