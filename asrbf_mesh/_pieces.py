@@ -34,7 +34,7 @@ from ._frame import HeightField
 from ._learn import MIN_POINTS, auto_d_min, learn_polished
 from ._piece import Piece
 from ._piece_map import PieceMap
-from ._polish import extend_and_solve, polish_weights
+from ._polish import drop_idle, extend_and_solve, polish_weights
 from ._segment import Segmentation
 from ._validate import progress as progress_bar
 
@@ -48,6 +48,10 @@ TAIL_ROUNDS = 3
 TAIL_NOISE = 3.0
 #: Tail refinement: neurons whose polished |weight| is under this multiple of E are dropped.
 TAIL_PRUNE = 0.3
+#: Tail refinement, last step: neurons whose removal (the other weights solved again)
+#: raises the sum of squared errors by less than this many E^2 are dropped
+#: (:func:`~asrbf_mesh._polish.drop_idle`).
+IDLE_RSS = 2.0
 #: Tail refinement: the data's slope at a point is a plane through this many samples.
 _SLOPE_NEIGHBOURS = 8
 #: Tail refinement: points sampled for the noise scale.
@@ -115,10 +119,11 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
                 sub, cfg, polish, seed=info["seed"], progress=False,
                 prune_below=TAIL_PRUNE * cfg.error_threshold)
             if polish != "none":
-                info["weak_pruned"] = len(learned.widths) - len(params[2])
                 tr = time.perf_counter()
-                params, info["tail_neurons"] = refine_tails(sub, cfg, *params, learned.d_min,
-                                                            pr)
+                params, info["tail_neurons"], _ = refine_tails(sub, cfg, *params,
+                                                               learned.d_min, pr)
+                info["weak_pruned"] = (len(learned.widths) + info["tail_neurons"]
+                                       - len(params[2]))
                 seconds += time.perf_counter() - tr
             piece = Piece(*params, learned.log, info)
             seq = None if pr is None else pr.ebar_before * sub.n_points
@@ -182,8 +187,8 @@ def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
 def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarray,
                  widths: np.ndarray, weights: np.ndarray, d_min: float,
                  polished: Any = None
-                 ) -> tuple[tuple[float, np.ndarray, np.ndarray, np.ndarray], int]:
-    """Add neurons where a polished piece still misses its points; (parameters, added).
+                 ) -> tuple[tuple[float, np.ndarray, np.ndarray, np.ndarray], int, int]:
+    """Add neurons where a polished piece misses its points; (parameters, added, dropped).
 
     Each round takes the points whose error across the surface (the depth error times
     the cosine of the slope, in physical proportions) exceeds ``max(TAIL_FACTOR E,
@@ -197,7 +202,9 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     then all the weights are solved together once, from the weight polish's normal
     equations (``polished``, its :class:`~asrbf_mesh._polish.PolishResult`) extended by
     the new neurons' rows (:func:`~asrbf_mesh._polish.extend_and_solve`), or by a new
-    weight polish after the full one.
+    weight polish after the full one. Last, the neurons the network hardly needs are
+    dropped (:func:`~asrbf_mesh._polish.drop_idle` with ``IDLE_RSS`` x E^2): each
+    would raise the sum of squared errors by less than two points off by E.
     """
     from scipy.spatial import cKDTree
 
@@ -232,15 +239,19 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         weights = np.r_[weights, a_new]
         added += len(picked)
     if added == 0:
-        return (a0, centers, widths, weights), 0
-    if polished is not None and polished.ata is not None \
+        pr = polished
+        if pr is None or pr.ata is None or pr.ata.shape[0] != len(widths) + 1:
+            return (a0, centers, widths, weights), 0, 0
+    elif polished is not None and polished.ata is not None \
             and polished.ata.shape[0] == len(widths) - added + 1:
         pr = extend_and_solve(sub.xy, sub.z, polished, a0, centers, widths, weights,
                               cfg.support, cfg.polish_ridge, points=points)
     else:
         pr = polish_weights(sub.xy, sub.z, a0, centers, widths, weights, cfg.support,
                             cfg.polish_ridge)
-    return (pr.a0, pr.centers, pr.widths, pr.weights), added
+    pr, dropped = drop_idle(sub.xy, sub.z, pr, cfg.support, cfg.polish_ridge,
+                            IDLE_RSS * cfg.error_threshold ** 2)
+    return (pr.a0, pr.centers, pr.widths, pr.weights), added, dropped
 
 
 def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: np.ndarray,

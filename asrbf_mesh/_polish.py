@@ -320,3 +320,74 @@ def polish_full(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
         done += 1
     after = float(np.mean(np.abs(r)))
     return PolishResult(a0c, cen, wid, wts, first.ebar_before, after, 1 + done)
+
+
+#: :func:`drop_idle` inverts the normal equations densely up to this many neurons.
+IDLE_MAX_NEURONS = 2048
+
+
+def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
+              ridge: float, limit: float, *, rounds: int = 2,
+              tolerance: float = 0.005) -> tuple[PolishResult, int]:
+    """Drop neurons the polished network hardly needs; (result, neurons dropped).
+
+    Removing neuron ``j`` and solving the other weights again raises the sum of
+    squared errors by ``a_j^2 / (M^-1)_jj`` (``M``: the ridge-regularized normal
+    equations of ``pr``, kept by the polish), the classic backward-elimination test.
+    Each round drops the neurons whose rise is under ``limit`` (unit depth squared),
+    smallest first and no two sharing a point (so the rises add up), and solves the
+    remaining weights from ``pr``'s normal equations: no design matrix is built again.
+    The result is kept when the mean absolute error grows by at most ``tolerance``
+    (relative); ``pr`` is returned unchanged for a network without normal equations or
+    above :data:`IDLE_MAX_NEURONS` neurons (the test inverts ``M`` densely).
+    """
+    import scipy.linalg as sla
+
+    k = len(pr.widths)
+    if pr.ata is None or pr.atz is None or k < 2 or k > IDLE_MAX_NEURONS \
+            or pr.ata.shape[0] != k + 1:
+        return pr, 0
+    ata = pr.ata.tocsr()
+    keep = np.arange(k)
+    w = np.concatenate([[pr.a0], pr.weights])
+    for _ in range(rounds):
+        cols = np.concatenate([[0], 1 + keep])
+        sub = ata[cols][:, cols]
+        lam = max(ridge, _RIDGE_FLOOR) * float(sub.diagonal().mean())
+        chol, info = sla.lapack.dpotrf(sub.toarray() + lam * np.eye(len(cols)), lower=1)
+        if info != 0:
+            break
+        inv, info = sla.lapack.dpotri(chol, lower=1)
+        if info != 0:
+            break
+        score = w[cols[1:]] ** 2 / np.diagonal(inv)[1:]
+        cand = np.flatnonzero(score < limit)
+        if len(cand) == 0:
+            break
+        near = sub[1:, 1:].tocsr()  # neurons sharing a point have a non-zero entry
+        blocked = np.zeros(len(keep), dtype=bool)
+        drop = []
+        for j in cand[np.argsort(score[cand], kind="stable")]:
+            if not blocked[j]:
+                drop.append(j)
+                blocked[near.indices[near.indptr[j]:near.indptr[j + 1]]] = True
+        keep = np.delete(keep, drop)
+        cols = np.concatenate([[0], 1 + keep])
+        sub = ata[cols][:, cols]
+        lam = max(ridge, _RIDGE_FLOOR) * float(sub.diagonal().mean())
+        w_sub = w[cols]
+        w_sub = w_sub + _solve_spd(sub + sp.diags(np.full(len(cols), lam)),
+                                   pr.atz[cols] - sub @ w_sub)
+        if not np.all(np.isfinite(w_sub)):
+            return pr, 0
+        w = np.zeros_like(w)
+        w[cols] = w_sub
+    if len(keep) == k:
+        return pr, 0
+    cols = np.concatenate([[0], 1 + keep])
+    centers, widths, weights = pr.centers[keep], pr.widths[keep], w[1 + keep]
+    after = float(np.abs(z - _predict(xy, w[0], centers, widths, weights, support)).mean())
+    if after > pr.ebar_after * (1.0 + tolerance):
+        return pr, 0
+    return PolishResult(float(w[0]), centers, widths, weights.copy(), pr.ebar_before, after,
+                        pr.iterations, ata[cols][:, cols].tocsr(), pr.atz[cols]), k - len(keep)

@@ -11,7 +11,7 @@ import asrbf_mesh as am
 from asrbf_mesh._config import FitConfig
 from asrbf_mesh._frame import to_height_field
 from asrbf_mesh._learn import learn
-from asrbf_mesh._polish import design_matrix, polish_full, polish_weights
+from asrbf_mesh._polish import design_matrix, drop_idle, polish_full, polish_weights
 
 
 @pytest.fixture(scope="module")
@@ -228,3 +228,39 @@ def test_large_systems_are_solved_by_conjugate_gradients() -> None:
     rhs = np.random.default_rng(0).standard_normal(mat.shape[0])
     np.testing.assert_allclose(_solve_spd(mat, rhs), spsolve(mat.tocsc(), rhs),
                                rtol=1e-7, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- idle neurons
+
+
+def _two_bumps():
+    """A height field of two Gaussians (3,600 points) and a network of them plus a twin."""
+    g = np.linspace(0.0, 1.0, 60)
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    centers = np.array([[0.3, 0.3], [0.7, 0.6]])
+    widths = np.array([0.15, 0.2])
+    z = 0.1 + design_matrix(xy, centers, widths, np.ones(2), 3.5)[:, 1:] @ [0.5, 0.3]
+    z += np.random.default_rng(0).normal(0.0, 1e-3, len(z))  # noise: E-bar 8e-4
+    # the second bump twice: either twin can go at no cost, never both
+    twin_c, twin_w = np.vstack([centers, centers[1]]), np.r_[widths, widths[1]]
+    return xy, z, twin_c, twin_w
+
+
+def test_drop_idle_drops_a_redundant_neuron_and_keeps_the_needed_ones() -> None:
+    xy, z, centers, widths = _two_bumps()
+    pr = polish_weights(xy, z, 0.0, centers, widths, np.array([0.4, 0.1, 0.1]), 3.5, 1e-8)
+    got, dropped = drop_idle(xy, z, pr, 3.5, 1e-8, 1e-6)
+    assert dropped == 1 and len(got.widths) == 2
+    assert sorted(got.widths.tolist()) == [0.15, 0.2]  # one bump each: the twin went
+    assert got.ebar_after < 1e-3 and mean_abs(xy, z, got.a0, got.centers, got.widths,
+                                              got.weights) == pytest.approx(got.ebar_after)
+    assert got.ata.shape == (3, 3) and got.atz.shape == (3,)  # still extendable
+    # a limit no neuron's removal stays under drops nothing
+    assert drop_idle(xy, z, pr, 3.5, 1e-8, 1e-30)[1] == 0
+
+
+def test_drop_idle_keeps_the_network_without_normal_equations(learned) -> None:
+    hf, st = learned
+    pr = polish_full(hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5,
+                     iterations=1)
+    assert drop_idle(hf.xy, hf.z, pr, 3.5, 1e-4, 1.0) == (pr, 0)
