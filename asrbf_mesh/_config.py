@@ -20,7 +20,7 @@ __all__ = ["FitConfig", "UPDATES", "PRUNINGS", "DECAYS", "POLISHES"]
 
 UPDATES = ("nekf", "nekf-neighbourhood", "gekf", "gd")
 PRUNINGS = ("none", "literal", "support")
-DECAYS = ("observation", "neurons")
+DECAYS = ("observation", "neurons", "pass")
 POLISHES = ("none", "weights", "full")
 #: Depth directions of a height field (``to_height_field``'s ``view_axis``).
 VIEW_AXES = ("z", "x", "y", "pca")
@@ -35,7 +35,7 @@ LOD_METHODS = ("resample", "refit")
 
 Update = Literal["nekf", "nekf-neighbourhood", "gekf", "gd"]
 Pruning = Literal["none", "literal", "support"]
-Decay = Literal["observation", "neurons"]
+Decay = Literal["observation", "neurons", "pass"]
 Polish = Literal["none", "weights", "full"]
 
 
@@ -58,12 +58,19 @@ class FitConfig:
         below E (see :func:`asrbf_mesh._learn.auto_d_min`).
     gamma : float
         Decay factor of the separation distance, eq. (4).
-    decay : {"observation", "neurons"}
+    decay : {"observation", "neurons", "pass"}
         What eq. (4) is indexed by. ``"neurons"`` is the paper's text
         (``D_K = max(D_max gamma^K, D_min)``); it stalls at about a dozen neurons,
         because a dozen spread neurons cover the unit square closer than ``D_K``.
         ``"observation"`` (default) decays with the observation index as in the
         RAN/MRAN networks the method builds on, which gives the paper's results.
+        ``"pass"`` also decays with the observation index, but reaches D_min after
+        ``decay_fraction`` of the first pass over the N points, whatever N (gamma is
+        then ``(D_min / D_max) ** (1 / (decay_fraction N))``, ``gamma`` unused): the
+        wide-to-narrow phase lasts that share of the data, where ``gamma = 0.99``
+        reaches D_min after a few hundred observations on any scan.
+    decay_fraction : float
+        Share of the first pass after which ``decay="pass"`` reaches D_min; in (0, 1].
     psi : float
         Overlap factor: a new neuron's width is ``psi`` times the distance to the
         nearest neuron, eq. (7). 0.7 for detailed scans, 0.8 for smooth objects.
@@ -120,6 +127,7 @@ class FitConfig:
     d_min: float | None = None
     gamma: float = 0.99
     decay: Decay = "observation"
+    decay_fraction: float = 0.1
     psi: float = 0.7
     window: int = 1000
     prune_threshold: float = 0.001
@@ -178,6 +186,7 @@ class FitConfig:
             real(name)
         real("d_min", optional=True)
         real("gamma", hi=1.0)
+        real("decay_fraction", hi=1.0, hi_open=False)
         real("psi", hi=1.0, hi_open=False)
         real("prune_threshold", lo_open=False, hi=1.0)
         real("process_noise", lo_open=False)

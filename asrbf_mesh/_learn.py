@@ -118,6 +118,9 @@ class _State:
         cf[_lk.CF_DMAX] = cfg.d_max
         cf[_lk.CF_DMIN] = d_min
         cf[_lk.CF_GAMMA] = cfg.gamma
+        if cfg.decay == "pass":  # D_min after decay_fraction of the first pass
+            steps = max(cfg.decay_fraction * n_points, 1.0)
+            cf[_lk.CF_GAMMA] = min(d_min / cfg.d_max, 1.0) ** (1.0 / steps)
         cf[_lk.CF_PSI] = cfg.psi
         cf[_lk.CF_PRUNE] = cfg.prune_threshold
         cf[_lk.CF_R] = cfg.measurement_noise
@@ -132,7 +135,7 @@ class _State:
         ci[_lk.CI_PWIN] = prune_window
         ci[_lk.CI_PRUNE] = ("none", "literal", "support").index(cfg.pruning)
         ci[_lk.CI_UPDATE] = ("nekf", "nekf-neighbourhood", "gekf", "gd").index(cfg.update)
-        ci[_lk.CI_DECAY] = ("observation", "neurons").index(cfg.decay)
+        ci[_lk.CI_DECAY] = _lk.DECAY_NEURONS if cfg.decay == "neurons" else _lk.DECAY_OBSERVATION
         ci[_lk.CI_MAXNB] = cfg.max_neighbours
         ci[_lk.CI_MAXK] = cfg.max_neurons if cfg.max_neurons is not None else 2**62
         ci[_lk.CI_LOGSTRIDE] = max(1, total_steps // _LOG_POINTS)

@@ -52,6 +52,8 @@ _LEARNING_OPTIONS: list[tuple[str, str, type, str]] = [
     ("d_min", "--d-min", float,
      "D_min, neuron separation level (default: max(2 x scan spacing, E), at most 0.2)"),
     ("gamma", "--gamma", float, "gamma, decay factor of the separation distance, eq. (4)"),
+    ("decay_fraction", "--decay-fraction", float,
+     "--decay pass: share of the first pass after which D reaches D_min"),
     ("psi", "--psi", float, "psi, overlap factor of new neuron widths, eq. (7)"),
     ("window", "--window", int, "omega, RMS window (criterion 3) and pruning window"),
     ("prune_threshold", "--prune-threshold", float, "P, pruning contribution threshold"),
@@ -70,8 +72,10 @@ _LEARNING_OPTIONS: list[tuple[str, str, type, str]] = [
 _CHOICE_OPTIONS = [
     ("update", "--update", UPDATES, "parameter updater"),
     ("pruning", "--pruning", PRUNINGS, "pruning rule ('literal' is the paper's)"),
-    ("decay", "--decay", DECAYS, "index of eq. (4): observation count (the paper's) or "
-                                 "neuron count"),
+    ("decay", "--decay", DECAYS, "index of eq. (4): 'neurons' as printed in the paper; "
+                                 "'observation' as in RAN/MRAN (gives the paper's results); "
+                                 "'pass': D_min reached after --decay-fraction of the first "
+                                 "pass"),
     ("polish", "--polish", POLISHES, "batch stage after learning ('none' is the paper's)"),
 ]
 

@@ -72,7 +72,9 @@ def test_from_dict_rejects_unknown_fields() -> None:
     ({"polish_iterations": -1}, "polish_iterations must be an integer >= 0"),
     ({"update": "ekf"}, "update must be one of nekf, nekf-neighbourhood, gekf, gd; got 'ekf'"),
     ({"pruning": "all"}, "pruning must be one of none, literal, support"),
-    ({"decay": "time"}, "decay must be one of observation, neurons"),
+    ({"decay": "time"}, "decay must be one of observation, neurons, pass"),
+    ({"decay_fraction": 0.0}, r"decay_fraction must be a number in \(0, 1\]"),
+    ({"decay_fraction": 1.5}, r"decay_fraction must be a number in \(0, 1\]"),
     ({"polish": "yes"}, "polish must be one of none, weights, full"),
 ])
 def test_invalid_values_are_rejected(changes: dict, match: str) -> None:

@@ -147,6 +147,22 @@ def test_literal_eq4_decay_stalls(franke_points) -> None:
     assert observation.info["ebar"] < literal.info["ebar"]
 
 
+def test_pass_decay_reaches_d_min_at_its_share_of_the_first_pass(franke_points) -> None:
+    # decay="pass" is the observation decay with gamma = (D_min / D_max) ** (1 / (f N))
+    n = len(franke_points)
+    short = fit(franke_points, decay="pass", decay_fraction=0.05, **SEQ)
+    d_min, d_max = short.info["d_min"], short.config.d_max
+    gamma = (d_min / d_max) ** (1.0 / (0.05 * n))
+    same = fit(franke_points, decay="observation", gamma=gamma, **SEQ)
+    np.testing.assert_array_equal(short.centers, same.centers)
+    np.testing.assert_array_equal(short.weights, same.weights)
+    # a longer wide-to-narrow phase: fewer, wider neurons than gamma = 0.99
+    long = fit(franke_points, decay="pass", decay_fraction=0.5, **SEQ)
+    today = fit(franke_points, **SEQ)
+    assert long.n_neurons < today.n_neurons
+    assert np.median(long.widths) > np.median(today.widths)
+
+
 def test_max_neurons_caps_k_with_a_warning(franke39) -> None:
     for cap in (5, 20):
         with pytest.warns(am.NeuronCapWarning, match=f"stopped growth at K = {cap}: "):
