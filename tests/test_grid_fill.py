@@ -189,3 +189,18 @@ def test_a_hole_the_spline_cannot_fill_gets_a_membrane(smooth_case, monkeypatch)
     assert np.all(np.isfinite(out.z_filled[voids]))
     lo, hi = np.nanmin(grid.z), np.nanmax(grid.z)
     assert np.all((out.z_filled[voids] >= lo) & (out.z_filled[voids] <= hi))
+
+
+def test_a_large_ring_keeps_its_rim_and_thins_the_rest() -> None:
+    from asrbf_mesh._grid_fill import _GRID_RING_MAX, _thin_ring
+
+    g = np.stack(np.meshgrid(np.arange(80.0), np.arange(80.0)), -1).reshape(-1, 2)
+    ring = np.arange(len(g)) * 3  # flat cell ids, any order-preserving labels
+    rim = ring[(np.abs(g[:, 0] - 40) <= 1) & (g[:, 1] < 60)]  # 180 rim cells
+    keep = _thin_ring(ring, g, rim)
+    assert len(keep) <= _GRID_RING_MAX and np.all(np.diff(keep) > 0)
+    assert np.isin(rim, ring[keep]).all()  # every rim cell kept
+    far = ring[keep][~np.isin(ring[keep], rim)]
+    assert 100 <= len(far) <= _GRID_RING_MAX - len(rim)  # the rest: thinned into the budget
+    small = np.arange(50)
+    assert np.array_equal(_thin_ring(small, g[:50], small[:5]), np.arange(50))
