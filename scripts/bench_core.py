@@ -1,4 +1,4 @@
-"""Core-engine benchmarks: fidelity, speed, baselines, updaters, pruning, polish, D_min.
+"""Core-engine benchmarks: fidelity, speed, baselines, pruning, polish, D_min.
 
     python scripts/bench_core.py            # everything, writes BENCHMARKS.md (~10 min)
     python scripts/bench_core.py --only speed fidelity
@@ -160,22 +160,6 @@ def baselines(S) -> str:
                  "LSQ grid of K E̅", "ours lowest E̅"], rows))
 
 
-def updaters(S) -> str:
-    scan = S["face"]
-    rng = np.random.default_rng(0)
-    pts = scan.points[rng.choice(scan.n_points, 4000, replace=False)]
-    hf = am.to_height_field(pts)
-    rows = []
-    for upd in ("gekf", "gd", "nekf", "nekf-neighbourhood"):
-        net, t_fit = timed(am.fit, pts, seed=0, update=upd, polish="none", progress=False)
-        f, t_eval = timed(net.evaluate, hf.xy, unit=True)
-        rows.append([upd, t_fit, t_eval * 1e3, net.n_neurons,
-                     1e3 * float(np.mean(np.abs(f - hf.z)))])
-    return ("### Updaters, paper Table 3 (face map subsample, N = 4,000, polish none, seed 0)\n\n"
-            + table(["updater", "T_para (s)", "T_rep (ms, all N points)", "K", "E̅ (10⁻³)"],
-                    rows))
-
-
 def speed(S) -> str:
     import numba
 
@@ -217,7 +201,7 @@ def speed(S) -> str:
 
 SECTIONS = {"fidelity": fidelity, "curve": accuracy_curve, "dmin": d_min_study,
             "pruning": pruning, "polish": polish, "baselines": baselines,
-            "updaters": updaters, "speed": speed}
+            "speed": speed}
 
 
 def main() -> None:
