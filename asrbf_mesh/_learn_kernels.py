@@ -198,11 +198,11 @@ def _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l
 
 @njit(cache=True)
 def _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count, out_idx, out_phi,
-                   out_d2):
+                   out_d2, out_pi):
     """Evaluate the network at (x, y): f without a0, sum |Pi_k|, and the support list.
 
-    Returns ``(f, sum_abs, m)``; ``out_*[:m]`` hold slot, phi and squared distance of
-    every neuron whose truncated support contains the point.
+    Returns ``(f, sum_abs, m)``; ``out_*[:m]`` hold slot, phi, squared distance and
+    |Pi_k| = |a_k phi_k| of every neuron whose truncated support contains the point.
     """
     supp2 = cf[CF_SUPPORT] * cf[CF_SUPPORT]
     f = 0.0
@@ -230,6 +230,7 @@ def _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count, out_idx, 
                             out_idx[m] = s
                             out_phi[m] = phi
                             out_d2[m] = d2
+                            out_pi[m] = abs(p)
                             m += 1
                         s = l_nxt[s]
         g = g >> 1
@@ -467,6 +468,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
     sup_pi = np.empty(cap)
     nb_idx = np.empty(cap, np.int64)
     nb_d2 = np.empty(cap)
+    nb_phi = np.empty(cap)
     g = np.empty(4)
     pb = np.empty(4)
     dw = np.empty(4)
@@ -488,6 +490,8 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
 
     pos = start
     n_order = order.shape[0]
+    at_floor = False
+    D = cf[CF_DMAX]
     while pos < n_order and st[ST_T] < t_end:
         t = st[ST_T]
         # a step that may add a neuron needs a free slot: ask for more slots before the
@@ -519,12 +523,10 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
         z = Z[i]
 
         # Stage 1: network output, residual (r = z - f: docs/design.md), windowed RMS.
+        # sup_pi: |Pi_k| of this observation's output, before the update (pruning)
         fk, sabs, m = _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count,
-                                     sup_idx, sup_phi, sup_d2)
+                                     sup_idx, sup_phi, sup_d2, sup_pi)
         r = z - (fs[FS_A0] + fk)
-        if prune_mode != PRUNE_NONE:  # |Pi_k| of this observation's output, before the update
-            for u in range(m):
-                sup_pi[u] = abs(W[sup_idx[u], 0]) * sup_phi[u]
         wp = st[ST_WPOS]
         if st[ST_WCOUNT] == window:
             fs[FS_WSUM] -= wbuf[wp]
@@ -541,7 +543,9 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
         rms = np.sqrt(max(fs[FS_WSUM], 0.0) / st[ST_WCOUNT])
 
         if ci[CI_DECAY] == DECAY_OBSERVATION:
-            D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** t, cf[CF_DMIN])
+            if not at_floor:  # D falls with t: once at D_min it stays there, no pow
+                D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** t, cf[CF_DMIN])
+                at_floor = D == cf[CF_DMIN]
         else:
             D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** st[ST_K], cf[CF_DMIN])
 
@@ -623,6 +627,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
                     nb_d2[j] = -1.0  # mark: no gradient
                     continue
                 nb_d2[j] = d2
+                nb_phi[j] = phi
                 _grad(W, s, x, y, phi, d2, g)
                 for a_ in range(4):
                     acc = 0.0
@@ -634,7 +639,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
                 d2 = nb_d2[j]
                 if d2 < 0.0:
                     continue
-                phi = np.exp(-d2 / (W[s, 1] * W[s, 1]))
+                phi = nb_phi[j]  # W[s] is unchanged since the support query
                 _grad(W, s, x, y, phi, d2, g)
                 for a_ in range(4):
                     acc = 0.0
@@ -769,17 +774,14 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
             thr = cf[CF_PRUNE] * sabs
             for u in range(m):
                 s = sup_idx[u]
-                if alive[s] == 0:
-                    continue
-                if sup_pi[u] >= thr:
-                    miss[s] = 0
-                else:
-                    miss[s] += 1
-                    if miss[s] >= pwin:
-                        st[ST_PRUNED] += 1
-                        _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell,
-                                l_head, l_nxt, l_prv, l_cell, l_lev, lev_count, Pg,
-                                nparam_full)
+                # branch-free count of consecutive misses (a dead slot's count is reset
+                # when the slot is reused)
+                ms = (miss[s] + 1) * (sup_pi[u] < thr)
+                miss[s] = ms
+                if ms >= pwin and alive[s] != 0:
+                    st[ST_PRUNED] += 1
+                    _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell,
+                            l_head, l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
         st[ST_T] = t + 1
         pos += 1
     return DONE, pos
@@ -792,9 +794,10 @@ def residuals(X, Z, W, alive, a0, cf, ci, l_head, l_nxt, lev_off, lev_count):
     sup_idx = np.empty(cap, np.int64)
     sup_phi = np.empty(cap)
     sup_d2 = np.empty(cap)
+    sup_pi = np.empty(cap)
     out = np.empty(X.shape[0])
     for i in range(X.shape[0]):
         f, _, _ = _support_query(X[i, 0], X[i, 1], W, cf, ci, l_head, l_nxt, lev_off,
-                                 lev_count, sup_idx, sup_phi, sup_d2)
+                                 lev_count, sup_idx, sup_phi, sup_d2, sup_pi)
         out[i] = Z[i] - a0 - f
     return out

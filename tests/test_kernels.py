@@ -65,8 +65,11 @@ class Neurons:
         idx = np.empty(s.cap, np.int64)
         phi = np.empty(s.cap)
         d2 = np.empty(s.cap)
+        pi = np.empty(s.cap)
         f, sabs, m = lk._support_query(x, y, s.W, s.cf, s.ci, s.l_head, s.l_nxt, s.lev_off,
-                                       s.lev_count, idx, phi, d2)
+                                       s.lev_count, idx, phi, d2, pi)
+        # |Pi_k| = |a_k phi_k| of every neuron in the list, summing to sum |Pi|
+        np.testing.assert_array_equal(pi[:m], np.abs(s.W[idx[:m], 0] * phi[:m]))
         return f, sabs, idx[:m].copy(), phi[:m].copy(), d2[:m].copy()
 
     def nearest(self, x: float, y: float):
