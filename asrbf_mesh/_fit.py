@@ -9,14 +9,13 @@ and learns them (:mod:`asrbf_mesh._pieces`), or learns the paper's single networ
 
 from __future__ import annotations
 
-import functools
 import time
 import warnings
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from . import _config
 from ._config import FitConfig
@@ -44,22 +43,6 @@ def check_pieces(pieces: Any) -> str | Segmentation:
     return check_choice(pieces, "pieces", _config.PIECES)
 
 
-def _one_blas_thread(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Run ``func`` with BLAS (OpenBLAS, MKL) on one thread.
-
-    A fit calls dense LAPACK only on small systems (:func:`~asrbf_mesh._polish.drop_idle`),
-    and BLAS worker threads that spin after such a call take the cores from the numba
-    kernels that follow: on the 2-core benchmark machine the piecewise fit of bun000
-    took 0.94-1.07 s with BLAS threads and 0.63-0.69 s without.
-    """
-    @functools.wraps(func)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with threadpool_limits(1, user_api="blas"):
-            return func(*args, **kwargs)
-    return wrapper
-
-
-@_one_blas_thread
 def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int = 0,
         view_axis: str = "z", pieces: str | int | Segmentation = "auto",
         progress: bool | None = None,
@@ -143,14 +126,20 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
         if len(fitted) < MIN_POINTS:
             raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points that are not "
                             f"isolated, got {len(fitted)}")
-    try:
-        hf = to_height_field(fitted, view_axis=view_axis)  # type: ignore[arg-type]
-    except ScanError as exc:
-        if not named or str(exc).startswith(named):
-            raise
-        raise ScanError(f"{named}{exc}") from None  # name the file, like load_scan
     t0 = time.perf_counter()
-    seg = _segmentation(pieces, fitted, faces, stray, view_axis)
+    # the cut into pieces runs beside the frame and sampling measures (both mostly
+    # KD-tree queries and compiled kernels that release the GIL): on two cores it hides
+    # most of the segmentation's time
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        cut = pool.submit(_segmentation, pieces, fitted, faces, stray, view_axis)
+        try:
+            hf = to_height_field(fitted, view_axis=view_axis)  # type: ignore[arg-type]
+        except ScanError as exc:
+            cut.cancel()
+            if not named or str(exc).startswith(named):
+                raise
+            raise ScanError(f"{named}{exc}") from None  # name the file, like load_scan
+        seg = cut.result()
     if seg is not None and order is not None:
         raise ConfigError("order applies to a single network: pass pieces=1")
     polish = polish_kind(hf.fold, cfg.polish)

@@ -490,8 +490,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
 
     pos = start
     n_order = order.shape[0]
-    at_floor = False
-    D = cf[CF_DMAX]
+    at_floor, D = False, cf[CF_DMAX]  # separation D of eq. (4), once at D_min no more pow
     while pos < n_order and st[ST_T] < t_end:
         t = st[ST_T]
         # a step that may add a neuron needs a free slot: ask for more slots before the
@@ -543,7 +542,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
         rms = np.sqrt(max(fs[FS_WSUM], 0.0) / st[ST_WCOUNT])
 
         if ci[CI_DECAY] == DECAY_OBSERVATION:
-            if not at_floor:  # D falls with t: once at D_min it stays there, no pow
+            if not at_floor:
                 D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** t, cf[CF_DMIN])
                 at_floor = D == cf[CF_DMIN]
         else:
@@ -774,9 +773,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
             thr = cf[CF_PRUNE] * sabs
             for u in range(m):
                 s = sup_idx[u]
-                # branch-free count of consecutive misses (a dead slot's count is reset
-                # when the slot is reused)
-                ms = (miss[s] + 1) * (sup_pi[u] < thr)
+                ms = (miss[s] + 1) * (sup_pi[u] < thr)  # no branch; reset on slot reuse
                 miss[s] = ms
                 if ms >= pwin and alive[s] != 0:
                     st[ST_PRUNED] += 1

@@ -342,6 +342,7 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
     above :data:`IDLE_MAX_NEURONS` neurons (the test inverts ``M`` densely).
     """
     import scipy.linalg as sla
+    from threadpoolctl import threadpool_limits
 
     k = len(pr.widths)
     if pr.ata is None or pr.atz is None or k < 2 or k > IDLE_MAX_NEURONS \
@@ -354,10 +355,13 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
         cols = np.concatenate([[0], 1 + keep])
         sub = ata[cols][:, cols]
         lam = max(ridge, _RIDGE_FLOOR) * float(sub.diagonal().mean())
-        chol, info = sla.lapack.dpotrf(sub.toarray() + lam * np.eye(len(cols)), lower=1)
-        if info != 0:
-            break
-        inv, info = sla.lapack.dpotri(chol, lower=1)
+        # one BLAS thread: worker threads left spinning after a threaded factorization
+        # took the cores from the numba kernels that follow it (the piecewise fit of
+        # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without)
+        with threadpool_limits(1, user_api="blas"):
+            chol, info = sla.lapack.dpotrf(sub.toarray() + lam * np.eye(len(cols)), lower=1)
+            if info == 0:
+                inv, info = sla.lapack.dpotri(chol, lower=1)
         if info != 0:
             break
         score = w[cols[1:]] ** 2 / np.diagonal(inv)[1:]

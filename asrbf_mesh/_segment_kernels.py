@@ -45,7 +45,7 @@ def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> n
     return out[np.lexsort((out[:, 1], out[:, 0]))]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump):
     # two sweeps over the same pairs: the first counts, the second fills (one kernel to
     # compile, no growing list)
@@ -118,7 +118,7 @@ def nearest_seed(indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray,
     return source
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _dijkstra(indptr, indices, weights, labels, piece, seeds, source):
     n = len(indptr) - 1
     dist = np.full(n, np.inf)
@@ -150,7 +150,7 @@ def _dijkstra(indptr, indices, weights, labels, piece, seeds, source):
     return source
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _push(hd, hp, size, d, p):
     i = size
     hd[i], hp[i] = d, p
@@ -164,7 +164,7 @@ def _push(hd, hp, size, d, p):
     return size + 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sift_down(hd, hp, size):
     i = 0
     while True:
