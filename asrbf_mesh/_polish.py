@@ -16,6 +16,7 @@ and over holes -- where learning left them instead of letting them explode.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -326,6 +327,14 @@ def polish_full(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
 IDLE_MAX_NEURONS = 2048
 
 
+@functools.cache
+def _blas_controller():
+    """The process's BLAS libraries, inspected once (a new inspection costs 1-2 ms)."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
 def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
               ridge: float, limit: float, *, rounds: int = 2,
               tolerance: float = 0.005) -> tuple[PolishResult, int]:
@@ -342,7 +351,6 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
     above :data:`IDLE_MAX_NEURONS` neurons (the test inverts ``M`` densely).
     """
     import scipy.linalg as sla
-    from threadpoolctl import threadpool_limits
 
     k = len(pr.widths)
     if pr.ata is None or pr.atz is None or k < 2 or k > IDLE_MAX_NEURONS \
@@ -358,7 +366,7 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
         # one BLAS thread: worker threads left spinning after a threaded factorization
         # took the cores from the numba kernels that follow it (the piecewise fit of
         # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without)
-        with threadpool_limits(1, user_api="blas"):
+        with _blas_controller().limit(limits=1, user_api="blas"):
             chol, info = sla.lapack.dpotrf(sub.toarray() + lam * np.eye(len(cols)), lower=1)
             if info == 0:
                 inv, info = sla.lapack.dpotri(chol, lower=1)
