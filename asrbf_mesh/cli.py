@@ -83,7 +83,8 @@ _CHOICE_OPTIONS = [
 def _add_learning(p: argparse.ArgumentParser, full: bool = True) -> None:
     d = FitConfig()
     g = p.add_argument_group("learning parameters (unit cube; the numeric defaults are the "
-                                 "paper's section 5.1 values; --pruning and --polish default "
+                                 "paper's section 5.1 values but --d-min's rule and "
+                                 "--decay-fraction; --decay, --pruning and --polish default "
                                  "to this package's choices, the paper's are named)")
     for field, flag, typ, text in _LEARNING_OPTIONS:
         g.add_argument(flag, dest=field, type=typ, default=None,
