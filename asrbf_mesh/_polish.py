@@ -329,7 +329,7 @@ IDLE_MAX_NEURONS = 2048
 
 @functools.cache
 def _blas_controller():
-    """The process's BLAS libraries, inspected once (a new inspection costs 1-2 ms)."""
+    """Return the process's BLAS libraries, inspected once (an inspection costs 1-2 ms)."""
     from threadpoolctl import ThreadpoolController
 
     return ThreadpoolController()

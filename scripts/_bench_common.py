@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import re
+import statistics
 import time
 import warnings
 from collections.abc import Callable, Iterable
@@ -49,6 +50,11 @@ def median_run(runs: list[dict], key: str = "ebar") -> dict:
     """The run whose ``key`` is the median (odd counts) or the lower median."""
     order = sorted(range(len(runs)), key=lambda i: runs[i][key])
     return runs[order[(len(runs) - 1) // 2]]
+
+
+def median_worst(values: list[float], fmt: str, worst: Callable = max) -> str:
+    """A table cell: the median of ``values`` and, in brackets, the worst of them."""
+    return f"{format(statistics.median(values), fmt)} ({format(worst(values), fmt)})"
 
 
 def table(headers: list[str], rows: list[list]) -> str:

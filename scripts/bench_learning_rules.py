@@ -16,7 +16,6 @@ the paper's literal pruning; no pruning.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
 import time
 import warnings
@@ -24,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _bench_common import machine, scans, table, write_section  # noqa: E402
+from _bench_common import machine, median_worst, scans, table, write_section  # noqa: E402
 
 import asrbf_mesh as am  # noqa: E402
 
@@ -37,10 +36,6 @@ RULES: list[tuple[str, dict]] = [
     ("pruning none", {"pruning": "none"}),
 ]
 HEADERS = ["scan", "rule", "K", "E̅ learned", "E̅ polished", "fit s"]
-
-
-def _cell(values: list[float], fmt: str) -> str:
-    return f"{format(statistics.median(values), fmt)} ({format(max(values), fmt)})"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -68,8 +63,8 @@ def main(argv: list[str] | None = None) -> int:
                     k.append(net.n_neurons)
                     seq.append(net.info["ebar_sequential"])
                     pol.append(net.info["ebar"])
-                rows.append([name, rule, _cell(k, ".0f"), _cell(seq, ".5f"),
-                             _cell(pol, ".5f"), _cell(sec, ".2f")])
+                rows.append([name, rule, median_worst(k, ".0f"), median_worst(seq, ".5f"),
+                             median_worst(pol, ".5f"), median_worst(sec, ".2f")])
                 print(" | ".join(map(str, rows[-1])), flush=True)
         sections.append(f"### {label}\n\n" + table(HEADERS, rows))
     seeds = ", ".join(map(str, args.seeds))

@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _bench_common import machine, scans, table, timed, write_section  # noqa: E402
+from _bench_common import machine, median_worst, scans, table, timed, write_section  # noqa: E402
 
 import asrbf_mesh as am  # noqa: E402
 from asrbf_mesh._igl import point_mesh_distance  # noqa: E402
@@ -124,8 +124,9 @@ def lod_main(seeds: list[int]) -> int:
                       f"{p_ms[-1]:.2f} %, level 0 / QEM {ratio[-1]:.2f}", flush=True)
             med = np.median(np.array(rms), axis=0)
             rows.append([name, label, " / ".join(f"{v:.3f}" for v in med),
-                         f"{sum(mono)} of {len(mono)} seeds", _cell(p_sm, ".2f"),
-                         _cell(p_ms, ".2f"), _cell(surf, ".2f"), _cell(ratio, ".2f")])
+                         f"{sum(mono)} of {len(mono)} seeds", median_worst(p_sm, ".2f"),
+                         median_worst(p_ms, ".2f"), median_worst(surf, ".2f"),
+                         median_worst(ratio, ".2f")])
     body = (f"## LOD sets of the piecewise model (issue 14): seeds {', '.join(map(str, seeds))}"
             f"\n\n_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --lod` ({time.perf_counter() - t0:.0f} s)._\n\n"
@@ -152,10 +153,6 @@ def _surface_only(mesh: am.Mesh, scan: am.Scan, ref: am.Mesh, fp) -> float:
     lab = fp.label_at(mesh.vertices[:, :2])
     keep = np.isin(lab, [0, *fp.outside])
     return float(np.percentile(point_mesh_distance(mesh.vertices[keep], ref), 99.9))
-
-
-def _cell(values: list[float], fmt: str, worst=max) -> str:
-    return f"{format(statistics.median(values), fmt)} ({format(worst(values), fmt)})"
 
 
 def _rows(name: str, scan: am.Scan, seeds: list[int]) -> list[list]:
@@ -189,11 +186,12 @@ def _rows(name: str, scan: am.Scan, seeds: list[int]) -> list[list]:
                   f"{sec:.1f} s, 99.9 % {rec[-1][5]:.2f} / {rec[-1][7]:.2f} %", flush=True)
         c = list(zip(*rec, strict=True))
         out.append([name, f"{scan.n_points:,}", label, str(int(statistics.median(c[0]))),
-                    _cell(c[1], ","), _cell(c[2], ".0f", min), _cell(c[3], ".5f"),
-                    _cell(c[4], ".2f"),
-                    f"{_cell(c[5], '.2f')} / {_cell(c[6], '.2f')}",
-                    f"{_cell(c[7], '.2f')} / {_cell(c[8], '.2f')}",
-                    f"{_cell(c[9], '.2f')} / {_cell(c[10], '.2f')}"])
+                    median_worst(c[1], ","), median_worst(c[2], ".0f", min),
+                    median_worst(c[3], ".5f"),
+                    median_worst(c[4], ".2f"),
+                    f"{median_worst(c[5], '.2f')} / {median_worst(c[6], '.2f')}",
+                    f"{median_worst(c[7], '.2f')} / {median_worst(c[8], '.2f')}",
+                    f"{median_worst(c[9], '.2f')} / {median_worst(c[10], '.2f')}"])
     return out
 
 
