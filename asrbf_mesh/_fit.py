@@ -134,8 +134,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
         cut = pool.submit(_segmentation, pieces, fitted, faces, stray, view_axis)
         try:
             hf = to_height_field(fitted, view_axis=view_axis)  # type: ignore[arg-type]
-        except ScanError as exc:
-            cut.cancel()
+        except ScanError as exc:  # (leaving the block waits for the cut: no stray thread)
             if not named or str(exc).startswith(named):
                 raise
             raise ScanError(f"{named}{exc}") from None  # name the file, like load_scan
@@ -195,7 +194,7 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
     added = 0
     if refine:
         tr = time.perf_counter()
-        params, added, _ = refine_tails(hf, cfg, *params, learned.d_min, pr)
+        params, added = refine_tails(hf, cfg, *params, learned.d_min, pr)
         polish_seconds += time.perf_counter() - tr
     a0, centers, widths, weights = params
     net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)

@@ -498,8 +498,9 @@ def _in_hull(pts: np.ndarray, q: np.ndarray) -> np.ndarray:
 def _thin_ring(ring: np.ndarray, xy: np.ndarray, rim: np.ndarray) -> np.ndarray:
     """Return indices into ``ring`` of at most :data:`_GRID_RING_MAX` cells, rim cells first.
 
-    The cells bordering the hole decide how the fill meets it: all of them are kept (up
-    to the cap), and the rest of the ring is thinned evenly to the remaining budget.
+    The cells bordering the hole decide how the fill meets it: all of them are kept and
+    the rest of the ring is thinned evenly to the remaining budget (a rim of more than
+    half the budget is thinned evenly with the rest).
     """
     every = np.arange(len(ring))
     if len(ring) <= _GRID_RING_MAX:

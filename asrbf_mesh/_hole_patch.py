@@ -88,12 +88,13 @@ def _lowpass(net: Network, hole_size: float, factor: float | None) -> Network:
         return Network(0.0, np.zeros((0, 2)), np.zeros(0), np.zeros(0), net.frame, net.config,
                        None, net.info)
     cut = factor * hole_size / float(np.sqrt(net.frame.scale[0] * net.frame.scale[1]))
-    if all(bool(np.all(p.widths >= cut)) for p in net.pieces):
+    keeps = [p.widths >= cut for p in net.pieces]
+    if all(k.all() for k in keeps):
         return net
     # a piece that keeps every neuron is reused as it is, its evaluation grid with it
-    pieces = tuple(p if np.all(p.widths >= cut) else
-                   Piece(p.a0, p.centers[p.widths >= cut], p.widths[p.widths >= cut],
-                         p.weights[p.widths >= cut], None, p.info) for p in net.pieces)
+    pieces = tuple(p if k.all() else Piece(p.a0, p.centers[k], p.widths[k], p.weights[k],
+                                           None, p.info)
+                   for p, k in zip(net.pieces, keeps, strict=True))
     return Network.from_pieces(pieces, net.frame, net.config, net.info, net.piece_map)
 
 

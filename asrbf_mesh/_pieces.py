@@ -120,8 +120,8 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
                 prune_below=TAIL_PRUNE * cfg.error_threshold)
             if polish != "none":
                 tr = time.perf_counter()
-                params, info["tail_neurons"], _ = refine_tails(sub, cfg, *params,
-                                                               learned.d_min, pr)
+                params, info["tail_neurons"] = refine_tails(sub, cfg, *params, learned.d_min,
+                                                            pr)
                 info["weak_pruned"] = (len(learned.widths) + info["tail_neurons"]
                                        - len(params[2]))
                 seconds += time.perf_counter() - tr
@@ -187,8 +187,8 @@ def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
 def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarray,
                  widths: np.ndarray, weights: np.ndarray, d_min: float,
                  polished: Any = None
-                 ) -> tuple[tuple[float, np.ndarray, np.ndarray, np.ndarray], int, int]:
-    """Add neurons where a polished piece misses its points; (parameters, added, dropped).
+                 ) -> tuple[tuple[float, np.ndarray, np.ndarray, np.ndarray], int]:
+    """Add neurons where a polished piece still misses its points; (parameters, added).
 
     Each round takes the points whose error across the surface (the depth error times
     the cosine of the slope, in physical proportions) exceeds ``max(TAIL_FACTOR E,
@@ -241,7 +241,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     if added == 0:
         pr = polished
         if pr is None or pr.ata is None or pr.ata.shape[0] != len(widths) + 1:
-            return (a0, centers, widths, weights), 0, 0
+            return (a0, centers, widths, weights), 0
     elif polished is not None and polished.ata is not None \
             and polished.ata.shape[0] == len(widths) - added + 1:
         pr = extend_and_solve(sub.xy, sub.z, polished, a0, centers, widths, weights,
@@ -249,9 +249,9 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     else:
         pr = polish_weights(sub.xy, sub.z, a0, centers, widths, weights, cfg.support,
                             cfg.polish_ridge)
-    pr, dropped = drop_idle(sub.xy, sub.z, pr, cfg.support, cfg.polish_ridge,
-                            IDLE_RSS * cfg.error_threshold ** 2)
-    return (pr.a0, pr.centers, pr.widths, pr.weights), added, dropped
+    pr, _ = drop_idle(sub.xy, sub.z, pr, cfg.support, cfg.polish_ridge,
+                      IDLE_RSS * cfg.error_threshold ** 2)
+    return (pr.a0, pr.centers, pr.widths, pr.weights), added
 
 
 def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: np.ndarray,
