@@ -355,7 +355,7 @@ def _heap_push_checked(hk, hs, hg, size, key, slot, gen, alive, gens):
                 hs[n] = hs[i]
                 hg[n] = hg[i]
                 n += 1
-        size = 0
+        size = np.int64(0)  # int64, not a literal 0: one compiled version of _heap_push
         for i in range(n):  # re-heapify by pushing in place
             size = _heap_push(hk, hs, hg, size, hk[i], hs[i], hg[i])
     return _heap_push(hk, hs, hg, size, key, slot, gen)
@@ -661,7 +661,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
                 if not _block_finite(W, P, s):
                     st[ST_DIVERGED] += 1
                     _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head,
-                            l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, 0)
+                            l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
                     continue
                 if not _block_healthy(P, s, cov_limit):
                     st[ST_RESET] += 1

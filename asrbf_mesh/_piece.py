@@ -33,6 +33,8 @@ def eval_grid(centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
     g = max(1, int(np.ceil(float((hi - lo).max()) / cell)))
     h = float((hi - lo).max()) / g
     lo = np.ascontiguousarray(lo, dtype=np.float64)
+    # read-only views whatever the caller holds: one compiled version of each kernel
+    centers, widths, weights = _read_only(centers), _read_only(widths), _read_only(weights)
     start, items = _nk.build_grid(centers, widths, support, lo, h, g)
     packed = _nk.pack_cells(centers, widths, weights, items)
     return support, lo, h, g, start, items, packed
@@ -45,7 +47,15 @@ def eval_unit(grid: tuple, uv: np.ndarray, a0: float, centers: np.ndarray, width
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     if not want_grad:
         return _nk.evaluate_values(uv, a0, packed, s, lo, h, g, start), np.zeros((0, 2))
-    return _nk.evaluate_with_gradient(uv, a0, centers, widths, weights, s, lo, h, g, start, items)
+    return _nk.evaluate_with_gradient(uv, a0, _read_only(centers), _read_only(widths),
+                                      _read_only(weights), s, lo, h, g, start, items)
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """Return a read-only view of float64 array ``a`` (numba compiles per writeability)."""
+    v = np.ascontiguousarray(a, dtype=np.float64).view()
+    v.flags.writeable = False
+    return v
 
 
 #: The square of a width must exceed this (1e-300): evaluation divides by it.
