@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, NoReturn
 
-from . import __version__
+from . import __version__, _warm
 from ._atomic import atomic_path, check_output_dir
 from ._config import (
     BLENDS,
@@ -356,7 +356,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"  wrote {d['footprint_mesh']} ({d['footprint_vertices']:,} vertices, footprint of "
           "the scan)")
     print(f"  wrote {d['full_mesh']} ({d['full_vertices']:,} vertices, whole normalized square)")
-    print("  (the first run after installing compiles the numba kernels, about 20 s, and caches "
+    print("  (the first run after installing compiles the numba kernels, 10-15 s, and caches "
           "them: later fits take about a second)")
     return 0
 
@@ -686,7 +686,7 @@ def main(argv: list[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         handler = signal.signal(signal.SIGTERM, _terminate)
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _warm.alongside(getattr(args, "command", None)):
             warnings.showwarning = _show_warning
             return int(args.run(args))
     except (Exception, KeyboardInterrupt, _Terminated) as exc:

@@ -1,0 +1,97 @@
+"""A first run compiles two things at once: the learning kernel here, the others beside it.
+
+numba compiles a kernel the first time it is called and caches the machine code; a fresh
+install therefore spends its first fit compiling, most of it (about 8 s of 16 s on the
+benchmark machine) on the learning kernel. Compilation holds a process-wide lock, so
+threads cannot share the work, but processes can: while a command that learns compiles
+the learning kernel, :func:`alongside` runs a helper process (``python -m
+asrbf_mesh._warm``) that compiles the kernels the command needs after learning (the
+weight polish, evaluation, reconstruction) and writes them to numba's cache, where the
+command finds them. Nothing starts when the learning kernel is cached already, and the
+helper never outlives the command.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+
+__all__ = ["alongside", "compile_after_learning"]
+
+#: Commands that learn a network (and so may compile the learning kernel first).
+LEARNING_COMMANDS = frozenset({"demo", "fit", "fill-holes", "lod", "compare"})
+
+
+def _learning_kernel_cached() -> bool:
+    """Whether numba's cache holds an index for the learning kernel (a cold install: no)."""
+    try:
+        from . import _learn_kernels
+
+        return os.path.exists(_learn_kernels.run_steps._cache._cache_file._index_path)
+    except Exception:  # noqa: BLE001 - numba internals moved: behave as if cached
+        return True
+
+
+@contextlib.contextmanager
+def alongside(command: str | None) -> Iterator[None]:
+    """Run the body with a compiling helper process beside it, on a cold cache only."""
+    proc = None
+    if command in LEARNING_COMMANDS and not os.environ.get("ASRBF_NO_WARM") \
+            and not _learning_kernel_cached():
+        try:
+            proc = subprocess.Popen([sys.executable, "-m", "asrbf_mesh._warm"],
+                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                    stderr=subprocess.DEVNULL)
+        except OSError:
+            proc = None  # no helper: the command compiles everything itself, as before
+    try:
+        yield
+    finally:
+        if proc is not None and proc.poll() is None:
+            proc.kill()  # numba writes cache files atomically: a kill leaves none half-done
+            proc.wait()
+
+
+def compile_after_learning() -> None:
+    """Call every kernel a learning command needs after the learning loop, on tiny data.
+
+    The calls go through the same functions as a real fit (the arrays have the same
+    types), so the cache entries written here are the ones the command looks up.
+    """
+    import warnings
+
+    import numpy as np
+
+    from ._config import FitConfig
+    from ._frame import to_height_field
+    from ._mesh import Mesh
+    from ._network import Network
+    from ._polish import polish_weights
+    from ._surface import reconstruct
+
+    warnings.simplefilter("ignore")
+    rng = np.random.default_rng(0)
+    g = np.linspace(0.0, 1.0, 40)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    pts = np.c_[x, y, 0.1 * np.sin(3.0 * x) * np.cos(2.0 * y)]
+    ij = np.arange(40 * 39).reshape(39, 40)[:, :39].ravel()
+    faces = np.r_[np.c_[ij, ij + 1, ij + 41], np.c_[ij, ij + 41, ij + 40]].astype(np.int64)
+    hf = to_height_field(pts)
+    cfg = FitConfig()
+    centers = rng.random((30, 2))
+    widths = np.full(30, 0.2)
+    weights = rng.normal(0.0, 0.05, 30)
+    pr = polish_weights(hf.xy, hf.z, 0.0, centers, widths, weights, cfg.support,
+                        cfg.polish_ridge)
+    net = Network(pr.a0, pr.centers, pr.widths, pr.weights, hf.frame, cfg)
+    net.evaluate(rng.random((10_000, 2)), unit=True)  # the threaded kernel
+    net.evaluate(rng.random((100, 2)), unit=True)  # the serial one
+    net.gradient(rng.random((100, 2)), unit=True)
+    reconstruct(net, footprint=Mesh(pts, faces))
+
+
+if __name__ == "__main__":  # pragma: no cover - the helper process
+    compile_after_learning()
