@@ -7,8 +7,9 @@ threads cannot share the work, but processes can: while a command that learns co
 the learning kernel, :func:`alongside` runs a helper process (``python -m
 asrbf_mesh._warm``) that compiles the kernels the command needs after learning (the
 weight polish, evaluation, reconstruction) and writes them to numba's cache, where the
-command finds them. Nothing starts when the learning kernel is cached already, and the
-helper never outlives the command.
+command finds them. The command compiles the learning kernel before anything else, so
+that the helper can compile the kernels of the cut into pieces first. Nothing starts when
+the learning kernel is cached already, and the helper never outlives the command.
 """
 
 from __future__ import annotations
@@ -47,6 +48,11 @@ def alongside(command: str | None) -> Iterator[None]:
                                     stderr=subprocess.DEVNULL)
         except OSError:
             proc = None  # no helper: the command compiles everything itself, as before
+    if proc is not None:  # the learning kernel now, while the helper compiles the rest
+        from ._config import FitConfig
+        from ._learn import _warm_up
+
+        _warm_up(FitConfig(), 0.01)
     try:
         yield
     finally:
@@ -70,15 +76,19 @@ def compile_after_learning() -> None:
     from ._mesh import Mesh
     from ._network import Network
     from ._polish import polish_weights
+    from ._segment import segment
     from ._surface import reconstruct
 
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(0)
-    g = np.linspace(0.0, 1.0, 40)
-    x, y = (a.ravel() for a in np.meshgrid(g, g))
-    pts = np.c_[x, y, 0.1 * np.sin(3.0 * x) * np.cos(2.0 * y)]
+    x, y = (a.ravel().astype(np.float64) for a in np.meshgrid(np.arange(40), np.arange(40)))
     ij = np.arange(40 * 39).reshape(39, 40)[:, :39].ravel()
     faces = np.r_[np.c_[ij, ij + 1, ij + 41], np.c_[ij, ij + 41, ij + 40]].astype(np.int64)
+    # first what a fit needs first: the cut into pieces, here of a ramp winding once
+    # around a point (a cliff along one ray: jump pairs, then the geodesic split)
+    ramp = 10.0 * (np.arctan2(y - 20.3, x - 19.7) % (2 * np.pi)) / (2 * np.pi)
+    segment(Mesh(np.c_[x, y, ramp], faces))
+    pts = np.c_[x, y, 4.0 * np.sin(0.1 * x) * np.cos(0.07 * y)]
     hf = to_height_field(pts)
     cfg = FitConfig()
     centers = rng.random((30, 2))

@@ -356,8 +356,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"  wrote {d['footprint_mesh']} ({d['footprint_vertices']:,} vertices, footprint of "
           "the scan)")
     print(f"  wrote {d['full_mesh']} ({d['full_vertices']:,} vertices, whole normalized square)")
-    print("  (the first run after installing compiles the numba kernels, 10-15 s, and caches "
-          "them: later fits take about a second)")
+    print("  (the first run after installing compiles the numba kernels, about 10 s before "
+          "the fit, and caches them: later runs start at once)")
     return 0
 
 
