@@ -7,9 +7,10 @@ threads cannot share the work, but processes can: while a command that learns co
 the learning kernel, :func:`alongside` runs a helper process (``python -m
 asrbf_mesh._warm``) that compiles the kernels the command needs after learning (the
 weight polish, evaluation, reconstruction) and writes them to numba's cache, where the
-command finds them. The command compiles the learning kernel before anything else, so
-that the helper can compile the kernels of the cut into pieces first. Nothing starts when
-the learning kernel is cached already, and the helper never outlives the command.
+command finds them. ``asrbf demo`` compiles the learning kernel before anything else, so
+that the helper's first kernels (the cut into pieces) are ready when the demo needs them.
+Nothing starts when the learning kernel is cached already, and the helper never outlives
+the command.
 """
 
 from __future__ import annotations
@@ -48,7 +49,10 @@ def alongside(command: str | None) -> Iterator[None]:
                                     stderr=subprocess.DEVNULL)
         except OSError:
             proc = None  # no helper: the command compiles everything itself, as before
-    if proc is not None:  # the learning kernel now, while the helper compiles the rest
+    if proc is not None and command == "demo":
+        # the learning kernel now, while the helper compiles the rest: the demo's input is
+        # known to be good (another command checks its input first, and a bad one gets
+        # its error at once, not after compiling)
         from ._config import FitConfig
         from ._learn import _warm_up
 
