@@ -5,9 +5,9 @@ install therefore spends its first fit compiling, most of it (about 8 s of 16 s 
 benchmark machine) on the learning kernel. Compilation holds a process-wide lock, so
 threads cannot share the work, but processes can: while a command that learns compiles
 the learning kernel, :func:`alongside` runs a helper process (``python -m
-asrbf_mesh._warm``) that compiles the kernels the command needs after learning (the
-weight polish, evaluation, reconstruction) and writes them to numba's cache, where the
-command finds them. ``asrbf demo`` compiles the learning kernel before anything else, so
+asrbf_mesh._warm``) that compiles the other kernels the command needs (the cut into
+pieces, the weight polish, evaluation, reconstruction) and writes them to numba's cache,
+where the command finds them. ``asrbf demo`` compiles the learning kernel before anything else, so
 that the helper's first kernels (the cut into pieces) are ready when the demo needs them.
 Nothing starts when the learning kernel is cached already, and the helper never outlives
 the command.
@@ -81,13 +81,12 @@ def compile_after_learning() -> None:
     from ._network import Network
     from ._polish import polish_weights
     from ._segment import segment
-    from ._surface import reconstruct
+    from ._surface import grid_faces, reconstruct
 
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(0)
     x, y = (a.ravel().astype(np.float64) for a in np.meshgrid(np.arange(40), np.arange(40)))
-    ij = np.arange(40 * 39).reshape(39, 40)[:, :39].ravel()
-    faces = np.r_[np.c_[ij, ij + 1, ij + 41], np.c_[ij, ij + 41, ij + 40]].astype(np.int64)
+    faces = grid_faces(40, 40)
     # first what a fit needs first: the cut into pieces, here of a ramp winding once
     # around a point (a cliff along one ray: jump pairs, then the geodesic split)
     ramp = 10.0 * (np.arctan2(y - 20.3, x - 19.7) % (2 * np.pi)) / (2 * np.pi)
