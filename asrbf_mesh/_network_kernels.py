@@ -9,7 +9,7 @@ box and points outside the box are still evaluated exactly.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 
 @njit(cache=True, inline="always")
@@ -95,18 +95,95 @@ def _exp_neg(t):
     return p * p
 
 
+#: Each cell's packed neuron list is padded to a multiple of this many entries (zero
+#: weight, zero 1/sigma^2: they add exactly 0), so the vectorized loop over a list has
+#: no scalar remainder: one AVX-512 register of float64 per step.
+PAD = 8
+
+
 @njit(cache=True)
-def pack_cells(centers, widths, weights, items):
-    """Neuron parameters in cell-list order (cx, cy, 1/sigma^2, a): contiguous per cell."""
-    n = items.shape[0]
-    out = np.empty((4, n))
-    for p in range(n):
-        j = items[p]
-        out[0, p] = centers[j, 0]
-        out[1, p] = centers[j, 1]
-        out[2, p] = 1.0 / (widths[j] * widths[j])
-        out[3, p] = weights[j]
-    return out
+def pack_cells(centers, widths, weights, start, items):
+    """Neuron parameters in cell-list order, each list padded to :data:`PAD` entries.
+
+    Returns ``(pstart, packed)``: cell ``c``'s entries are ``packed[:, pstart[c]:pstart[c
+    + 1]]``, rows (cx, cy, 1/sigma^2, a), contiguous per cell; padding entries are zeros.
+    """
+    ncell = start.shape[0] - 1
+    pstart = np.zeros(ncell + 1, np.int64)
+    for c in range(ncell):
+        n = start[c + 1] - start[c]
+        pstart[c + 1] = pstart[c] + (n + PAD - 1) // PAD * PAD
+    out = np.zeros((4, pstart[ncell]))
+    for c in range(ncell):
+        q = pstart[c]
+        for p in range(start[c], start[c + 1]):
+            j = items[p]
+            out[0, q] = centers[j, 0]
+            out[1, q] = centers[j, 1]
+            out[2, q] = 1.0 / (widths[j] * widths[j])
+            out[3, q] = weights[j]
+            q += 1
+    return pstart, out
+
+
+#: Points are evaluated in blocks of this many (fewer when that would leave a thread
+#: idle; up to 16 x more on grids of more cells, so that the counting sort's table costs
+#: at most one entry per point). A block's points are visited cell by cell, so each
+#: cell's neuron list is read from L1 by every point of the block in that cell. On
+#: random points (face map network, K = 1,416, one thread): 6.9 M points/s point by
+#: point, 17 M points/s in blocks of 16,384. A block with fewer points than a quarter of
+#: the cells is evaluated point by point (a sort would cost more than it saves).
+BLOCK = 16384
+
+
+@njit(cache=True, fastmath=_FAST)
+def _cell_sum(x, y, cx, cy, inv, a, supp2):
+    """Sum of the truncated Gaussians of one cell's list at (x, y): branch- and gather-free."""
+    f = 0.0
+    for p in range(cx.shape[0]):
+        dx = x - cx[p]
+        dy = y - cy[p]
+        t = (dx * dx + dy * dy) * inv[p]
+        v = a[p] * _exp_neg(min(t, 40.0))
+        f += v if t < supp2 else 0.0
+    return f
+
+
+@njit(cache=True, fastmath=_FAST)
+def _values_block(pts, b0, b1, out, a0, packed, pstart, supp2, lo, h, g):
+    """Evaluate points ``b0:b1`` into ``out``, visiting them cell by cell (counting sort)."""
+    px, py, inv, a = packed[0], packed[1], packed[2], packed[3]
+    if 4 * (b1 - b0) < g * g:  # few points on a fine grid: one by one
+        for i in range(b0, b1):
+            c = _cell(pts[i, 1], lo[1], h, g) * g + _cell(pts[i, 0], lo[0], h, g)
+            s0 = pstart[c]
+            s1 = pstart[c + 1]
+            out[i] = a0 + _cell_sum(pts[i, 0], pts[i, 1], px[s0:s1], py[s0:s1], inv[s0:s1],
+                                    a[s0:s1], supp2)
+        return
+    count = np.zeros(g * g + 1, np.int64)
+    cell = np.empty(b1 - b0, np.int64)
+    for i in range(b0, b1):
+        c = _cell(pts[i, 1], lo[1], h, g) * g + _cell(pts[i, 0], lo[0], h, g)
+        cell[i - b0] = c
+        count[c + 1] += 1
+    for c in range(g * g):
+        count[c + 1] += count[c]
+    order = np.empty(b1 - b0, np.int64)
+    for i in range(b1 - b0):
+        order[count[cell[i]]] = b0 + i
+        count[cell[i]] += 1  # ends as the end of the cell's run
+    r = 0
+    for c in range(g * g):
+        if count[c] == r:
+            continue
+        s0 = pstart[c]
+        s1 = pstart[c + 1]
+        X, Y, S, A = px[s0:s1], py[s0:s1], inv[s0:s1], a[s0:s1]
+        while r < count[c]:
+            i = order[r]
+            out[i] = a0 + _cell_sum(pts[i, 0], pts[i, 1], X, Y, S, A, supp2)
+            r += 1
 
 
 #: Below this many points :func:`evaluate_values` runs on one thread: waking the thread
@@ -115,40 +192,35 @@ def pack_cells(centers, widths, weights, items):
 SERIAL_BELOW = 8192
 
 
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _value_at(pts, i, a0, packed, supp2, lo, h, g, start):
-    """Value of f at point ``i``: a branch-free, gather-free loop over its cell's neurons."""
-    x, y, c = _locate(pts, i, lo, h, g)
-    f = 0.0
-    for p in range(start[c], start[c + 1]):
-        dx = x - packed[0, p]
-        dy = y - packed[1, p]
-        t = (dx * dx + dy * dy) * packed[2, p]
-        v = packed[3, p] * _exp_neg(min(t, 40.0))
-        f += v if t < supp2 else 0.0
-    return a0 + f
-
-
-@njit(cache=True, parallel=True, fastmath=_FAST)
-def _values_parallel(pts, a0, packed, support, lo, h, g, start):
-    out = np.empty(pts.shape[0])
-    for i in prange(pts.shape[0]):
-        out[i] = _value_at(pts, i, a0, packed, support * support, lo, h, g, start)
+@njit(cache=True, parallel=True)
+def _values_parallel(pts, a0, packed, pstart, support, lo, h, g, threads):
+    m = pts.shape[0]
+    out = np.empty(m)
+    # at least four blocks a thread (a few thousand points still use every thread), and
+    # at least one point per cell in a block (the counting sort's table) up to 16 BLOCKs
+    n = max(min(BLOCK, (m + 4 * threads - 1) // (4 * threads)), min(g * g, 16 * BLOCK), 1)
+    for b in prange((m + n - 1) // n):
+        _values_block(pts, b * n, min(m, (b + 1) * n), out, a0, packed, pstart,
+                      support * support, lo, h, g)
     return out
 
 
-@njit(cache=True, fastmath=_FAST)
-def _values_serial(pts, a0, packed, support, lo, h, g, start):
-    out = np.empty(pts.shape[0])
-    for i in range(pts.shape[0]):
-        out[i] = _value_at(pts, i, a0, packed, support * support, lo, h, g, start)
+@njit(cache=True)
+def _values_serial(pts, a0, packed, pstart, support, lo, h, g):
+    m = pts.shape[0]
+    out = np.empty(m)
+    n = max(BLOCK, min(g * g, 16 * BLOCK))
+    for b in range((m + n - 1) // n):
+        _values_block(pts, b * n, min(m, (b + 1) * n), out, a0, packed, pstart,
+                      support * support, lo, h, g)
     return out
 
 
-def evaluate_values(pts, a0, packed, support, lo, h, g, start):
+def evaluate_values(pts, a0, packed, pstart, support, lo, h, g):
     """Evaluate f (M,) at unit-square points (M, 2) (threads from :data:`SERIAL_BELOW` up)."""
-    kernel = _values_serial if pts.shape[0] < SERIAL_BELOW else _values_parallel
-    return kernel(pts, a0, packed, support, lo, h, g, start)
+    if pts.shape[0] < SERIAL_BELOW:
+        return _values_serial(pts, a0, packed, pstart, support, lo, h, g)
+    return _values_parallel(pts, a0, packed, pstart, support, lo, h, g, get_num_threads())
 
 
 @njit(cache=True, parallel=True)

@@ -19,7 +19,7 @@ __all__ = ["Piece", "FitLog", "eval_grid", "eval_unit"]
 
 def eval_grid(centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
               support: float) -> tuple:
-    """Build the static evaluation grid ``(support, lo, h, g, start, items, packed)``.
+    """Build the static evaluation grid ``(support, lo, h, g, start, items, pstart, packed)``.
 
     Cells are about the size of a median truncated support (at most 512 per axis)
     over the unit square extended to every centre.
@@ -36,17 +36,17 @@ def eval_grid(centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
     # read-only views whatever the caller holds: one compiled version of each kernel
     centers, widths, weights = _read_only(centers), _read_only(widths), _read_only(weights)
     start, items = _nk.build_grid(centers, widths, support, lo, h, g)
-    packed = _nk.pack_cells(centers, widths, weights, items)
-    return support, lo, h, g, start, items, packed
+    pstart, packed = _nk.pack_cells(centers, widths, weights, start, items)
+    return support, lo, h, g, start, items, pstart, packed
 
 
 def eval_unit(grid: tuple, uv: np.ndarray, a0: float, centers: np.ndarray, widths: np.ndarray,
               weights: np.ndarray, want_grad: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Evaluate f (and optionally its gradient) at unit-square points through a grid."""
-    s, lo, h, g, start, items, packed = grid
+    s, lo, h, g, start, items, pstart, packed = grid
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     if not want_grad:
-        return _nk.evaluate_values(uv, a0, packed, s, lo, h, g, start), np.zeros((0, 2))
+        return _nk.evaluate_values(uv, a0, packed, pstart, s, lo, h, g), np.zeros((0, 2))
     return _nk.evaluate_with_gradient(uv, a0, _read_only(centers), _read_only(widths),
                                       _read_only(weights), s, lo, h, g, start, items)
 

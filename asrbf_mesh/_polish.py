@@ -73,7 +73,7 @@ def design_matrix(xy: np.ndarray, centers: np.ndarray, widths: np.ndarray,
     [[1.0, 1.0], [1.0, 0.0]]
     """
     pts = np.ascontiguousarray(xy, dtype=np.float64)
-    _, lo, h, g, start, items, _ = eval_grid(centers, widths, weights, support)
+    _, lo, h, g, start, items, _, _ = eval_grid(centers, widths, weights, support)
     indptr, cols, vals = _nk.design_rows(pts, centers, widths, weights, support, lo, h, g,
                                          start, items, full)
     n = len(pts)

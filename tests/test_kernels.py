@@ -361,6 +361,26 @@ def test_network_evaluate_and_gradient_match_brute_force(seed: int) -> None:
     assert net.evaluate(np.array([[50.0, 50.0]]), unit=True)[0] == net.a0
 
 
+@pytest.mark.parametrize(("k", "widths"), [(250, (1e-3, 0.5)), (3000, (2e-3, 4e-3))])
+def test_blocked_evaluation_matches_brute_force_on_every_path(k, widths) -> None:
+    """Blocks sorted by cell (threaded and serial), and few points on a fine grid one by one."""
+    from asrbf_mesh import _network_kernels as nk
+
+    net = random_network(7, k=k, widths=widths)
+    rng = np.random.default_rng(3)
+    many = rng.uniform(-0.2, 1.2, (3 * nk.BLOCK + 17, 2))  # several blocks, a partial one
+    f = net.evaluate(many, unit=True)
+    assert f.shape == (len(many),)
+    probe = rng.choice(len(many), 600, replace=False)
+    f_ref, _, scale = brute_eval(net, many[probe])
+    assert np.all(np.abs(f[probe] - f_ref) <= 1e-11 * scale)
+    # each point's value depends on the point alone: not on its block, order or neighbours
+    perm = rng.permutation(len(many))
+    np.testing.assert_array_equal(net.evaluate(many[perm], unit=True), f[perm])
+    few = many[probe[:50]]  # below SERIAL_BELOW; on the fine grid, fewer points than cells
+    np.testing.assert_array_equal(net.evaluate(few, unit=True), f[probe[:50]])
+
+
 def test_build_grid_cells_hold_every_neuron_reaching_them() -> None:
     net = random_network(3)
     from asrbf_mesh._piece import eval_grid
