@@ -28,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._learn_heap import _heap_pop, _heap_push_checked
+
 # --- indices into the configuration arrays -------------------------------------------------
 # float configuration ``cf``
 CF_E = 0  # E, local error threshold (criterion 2)
@@ -201,13 +203,22 @@ def _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count, out_idx, 
                    out_d2, out_pi):
     """Evaluate the network at (x, y): f without a0, sum |Pi_k|, and the support list.
 
-    Returns ``(f, sum_abs, m)``; ``out_*[:m]`` hold slot, phi, squared distance and
-    |Pi_k| = |a_k phi_k| of every neuron whose truncated support contains the point.
+    Returns ``(f, sum_abs, m, near, near_d2)``; ``out_*[:m]`` hold slot, phi, squared
+    distance and |Pi_k| = |a_k phi_k| of every neuron whose truncated support contains
+    the point. ``near`` (-1 if none) is the closest centre among the neurons looked at,
+    ``near_d2`` its squared distance: every neuron stored at level ``l`` whose centre lies
+    within that level's cell size of the point is looked at, so when ``near_d2`` is below
+    the finest cell size squared, ``near`` is the nearest centre of all (see
+    :func:`run_steps`).
     """
     supp2 = cf[CF_SUPPORT] * cf[CF_SUPPORT]
-    f = 0.0
-    sabs = 0.0
+    # pass 1 walks the cells' lists and keeps the neurons whose support holds the point,
+    # without a branch (a candidate is written, and kept by counting it): most neurons in
+    # the 3 x 3 cells are outside their support, and the kept ones come at random, a
+    # mispredicted branch each; pass 2 evaluates the kept ones in the same order
     m = 0
+    best = np.inf
+    bk = -1
     g = ci[CI_G0]
     for lev in range(ci[CI_NLEV]):
         if lev_count[lev] > 0:
@@ -222,19 +233,26 @@ def _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count, out_idx, 
                         dy = y - W[s, 3]
                         d2 = dx * dx + dy * dy
                         sig = W[s, 1]
-                        if d2 < supp2 * sig * sig:
-                            phi = np.exp(-d2 / (sig * sig))
-                            p = W[s, 0] * phi
-                            f += p
-                            sabs += abs(p)
-                            out_idx[m] = s
-                            out_phi[m] = phi
-                            out_d2[m] = d2
-                            out_pi[m] = abs(p)
-                            m += 1
+                        out_idx[m] = s
+                        out_d2[m] = d2
+                        m += d2 < supp2 * sig * sig
+                        if d2 < best:
+                            best = d2
+                            bk = s
                         s = l_nxt[s]
         g = g >> 1
-    return f, sabs, m
+    f = 0.0
+    sabs = 0.0
+    for u in range(m):
+        s = out_idx[u]
+        sig = W[s, 1]
+        phi = np.exp(-out_d2[u] / (sig * sig))
+        p = W[s, 0] * phi
+        f += p
+        sabs += abs(p)
+        out_phi[u] = phi
+        out_pi[u] = abs(p)
+    return f, sabs, m, bk, best
 
 
 @njit(cache=True)
@@ -298,67 +316,6 @@ def _within(x, y, radius, W, cf, ci, c_head, c_nxt, out_idx, out_d2):
                     m += 1
                 s = c_nxt[s]
     return m
-
-
-# --- pruning deadline heap ----------------------------------------------------------------
-
-
-@njit(cache=True)
-def _heap_push(hk, hs, hg, size, key, slot, gen):
-    i = size
-    hk[i] = key
-    hs[i] = slot
-    hg[i] = gen
-    while i > 0:
-        p = (i - 1) >> 1
-        if hk[p] < hk[i] or (hk[p] == hk[i] and hs[p] <= hs[i]):
-            break
-        hk[p], hk[i] = hk[i], hk[p]
-        hs[p], hs[i] = hs[i], hs[p]
-        hg[p], hg[i] = hg[i], hg[p]
-        i = p
-    return size + 1
-
-
-@njit(cache=True)
-def _heap_pop(hk, hs, hg, size):
-    size -= 1
-    hk[0] = hk[size]
-    hs[0] = hs[size]
-    hg[0] = hg[size]
-    i = 0
-    while True:
-        lc = 2 * i + 1
-        if lc >= size:
-            break
-        c = lc
-        rc = lc + 1
-        if rc < size and (hk[rc] < hk[lc] or (hk[rc] == hk[lc] and hs[rc] < hs[lc])):
-            c = rc
-        if hk[i] < hk[c] or (hk[i] == hk[c] and hs[i] <= hs[c]):
-            break
-        hk[c], hk[i] = hk[i], hk[c]
-        hs[c], hs[i] = hs[i], hs[c]
-        hg[c], hg[i] = hg[i], hg[c]
-        i = c
-    return size
-
-
-@njit(cache=True)
-def _heap_push_checked(hk, hs, hg, size, key, slot, gen, alive, gens):
-    """Push; when the arrays are full, first drop the stale entries of removed neurons."""
-    if size == hk.shape[0]:
-        n = 0
-        for i in range(size):
-            if alive[hs[i]] and gens[hs[i]] == hg[i]:
-                hk[n] = hk[i]
-                hs[n] = hs[i]
-                hg[n] = hg[i]
-                n += 1
-        size = np.int64(0)  # int64, not a literal 0: one compiled version of _heap_push
-        for i in range(n):  # re-heapify by pushing in place
-            size = _heap_push(hk, hs, hg, size, hk[i], hs[i], hg[i])
-    return _heap_push(hk, hs, hg, size, key, slot, gen)
 
 
 # --- EKF helpers --------------------------------------------------------------------------
@@ -487,6 +444,7 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
     update = ci[CI_UPDATE]
     stride = ci[CI_LOGSTRIDE]
     cov_limit = 1e6 * p0
+    near_safe = (0.999 / ci[CI_G0]) ** 2  # below the finest support cell, squared
 
     pos = start
     n_order = order.shape[0]
@@ -523,8 +481,9 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
 
         # Stage 1: network output, residual (r = z - f: docs/design.md), windowed RMS.
         # sup_pi: |Pi_k| of this observation's output, before the update (pruning)
-        fk, sabs, m = _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count,
-                                     sup_idx, sup_phi, sup_d2, sup_pi)
+        fk, sabs, m, near, near_d2 = _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off,
+                                                    lev_count, sup_idx, sup_phi, sup_d2,
+                                                    sup_pi)
         r = z - (fs[FS_A0] + fk)
         wp = st[ST_WPOS]
         if st[ST_WCOUNT] == window:
@@ -548,7 +507,12 @@ def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_a
         else:
             D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** st[ST_K], cf[CF_DMIN])
 
-        near, dist = _nearest(x, y, W, cf, ci, c_head, c_nxt)
+        # the support query saw every centre within the finest level's cell of x: a centre
+        # it saw closer than that is the nearest of all (the ring search only otherwise)
+        if near >= 0 and near_d2 < near_safe:
+            dist = np.sqrt(near_d2)
+        else:
+            near, dist = _nearest(x, y, W, cf, ci, c_head, c_nxt)
         grow = dist > D and abs(r) > E and rms > EW
         if grow and st[ST_K] >= ci[CI_MAXK]:
             st[ST_CAPPED] += 1
@@ -794,7 +758,7 @@ def residuals(X, Z, W, alive, a0, cf, ci, l_head, l_nxt, lev_off, lev_count):
     sup_pi = np.empty(cap)
     out = np.empty(X.shape[0])
     for i in range(X.shape[0]):
-        f, _, _ = _support_query(X[i, 0], X[i, 1], W, cf, ci, l_head, l_nxt, lev_off,
+        f, _, _, _, _ = _support_query(X[i, 0], X[i, 1], W, cf, ci, l_head, l_nxt, lev_off,
                                  lev_count, sup_idx, sup_phi, sup_d2, sup_pi)
         out[i] = Z[i] - a0 - f
     return out

@@ -14,6 +14,7 @@ import heapq
 import numpy as np
 import pytest
 
+from asrbf_mesh import _learn_heap as lh
 from asrbf_mesh import _learn_kernels as lk
 from asrbf_mesh import _network_kernels as nk
 from asrbf_mesh._config import FitConfig
@@ -33,6 +34,7 @@ class Neurons:
     def __init__(self, d_min: float, cfg: FitConfig | None = None, steps: int = 1000) -> None:
         self.cfg = cfg = cfg or FitConfig()
         self.s = _State(cfg, d_min, steps, steps, cfg.window, cfg.prune_window or cfg.window)
+        self.near_shortcuts = 0  # support queries whose closest centre was the nearest
 
     # -- mutation
     def add(self, a: float, sigma: float, ux: float, uy: float) -> int:
@@ -66,10 +68,19 @@ class Neurons:
         phi = np.empty(s.cap)
         d2 = np.empty(s.cap)
         pi = np.empty(s.cap)
-        f, sabs, m = lk._support_query(x, y, s.W, s.cf, s.ci, s.l_head, s.l_nxt, s.lev_off,
-                                       s.lev_count, idx, phi, d2, pi)
+        f, sabs, m, near, near_d2 = lk._support_query(x, y, s.W, s.cf, s.ci, s.l_head,
+                                                      s.l_nxt, s.lev_off, s.lev_count,
+                                                      idx, phi, d2, pi)
         # |Pi_k| = |a_k phi_k| of every neuron in the list, summing to sum |Pi|
         np.testing.assert_array_equal(pi[:m], np.abs(s.W[idx[:m], 0] * phi[:m]))
+        # the closest centre it saw: the nearest of all when closer than the finest cell
+        # (run_steps then skips the ring search)
+        k, dist2 = self.brute_distances(x, y)
+        if near >= 0 and near_d2 < (0.999 / s.ci[lk.CI_G0]) ** 2:
+            self.near_shortcuts += 1
+            assert near_d2 == dist2.min() and near in set(k[dist2 == dist2.min()].tolist())
+        elif len(k) and near >= 0:
+            assert near_d2 >= dist2.min()
         return f, sabs, idx[:m].copy(), phi[:m].copy(), d2[:m].copy()
 
     def nearest(self, x: float, y: float):
@@ -176,6 +187,7 @@ def check_queries(state: Neurons, rng: np.random.Generator) -> None:
             assert len(got) == len(set(got.tolist()))
             assert set(got.tolist()) == set(k[bd2 <= radius * radius].tolist())
     assert hits > len(pts), "the query points should hit the supports of many neurons"
+    assert state.near_shortcuts > len(pts) / 10, "the nearest-centre shortcut is exercised"
 
 
 @pytest.mark.parametrize("d_min", [0.002, 0.01, 0.1])
@@ -285,18 +297,18 @@ def test_heap_matches_heapq_order() -> None:
         if size < n and (size == 0 or rng.random() < 0.55):
             key, slot, gen = int(rng.integers(0, 40)), int(rng.integers(0, 30)), int(
                 rng.integers(0, 1000))
-            size = lk._heap_push(hk, hs, hg, size, key, slot, gen)
+            size = lh._heap_push(hk, hs, hg, size, key, slot, gen)
             heapq.heappush(ref, (key, slot))
             assert (hk[0], hs[0]) == ref[0]
         else:
             top = (int(hk[0]), int(hs[0]))
             assert top == heapq.heappop(ref)
-            size = lk._heap_pop(hk, hs, hg, size)
+            size = lh._heap_pop(hk, hs, hg, size)
             popped += 1
         assert size == len(ref)
     while size:
         assert (int(hk[0]), int(hs[0])) == heapq.heappop(ref)
-        size = lk._heap_pop(hk, hs, hg, size)
+        size = lh._heap_pop(hk, hs, hg, size)
     assert popped > 500
 
 
@@ -306,11 +318,11 @@ def test_heap_keeps_generation_with_its_entry() -> None:
     hg = np.zeros(8, np.int64)
     size = 0
     for key, slot in [(5, 1), (3, 2), (9, 3), (1, 4), (7, 5)]:
-        size = lk._heap_push(hk, hs, hg, size, key, slot, 100 * slot)
+        size = lh._heap_push(hk, hs, hg, size, key, slot, 100 * slot)
     out = []
     while size:
         out.append((int(hk[0]), int(hs[0]), int(hg[0])))
-        size = lk._heap_pop(hk, hs, hg, size)
+        size = lh._heap_pop(hk, hs, hg, size)
     assert out == [(1, 4, 400), (3, 2, 200), (5, 1, 100), (7, 5, 500), (9, 3, 300)]
 
 
