@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
+
 __all__ = ["_heap_pop", "_heap_push", "_heap_push_checked"]
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
 from ._learn_heap import _heap_pop, _heap_push_checked
 
 # --- indices into the configuration arrays -------------------------------------------------

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import get_num_threads, njit, prange
 
+from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
+
 
 @njit(cache=True, inline="always")
 def _cell(v, lo, h, g):

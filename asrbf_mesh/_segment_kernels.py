@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
+
 #: The bucket grid has at most this many cells per point (wider cells beyond).
 _CELLS_PER_POINT = 4
 

@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .. import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
+
 
 @njit(cache=True)
 def train_online(w: np.ndarray, x: np.ndarray, order: np.ndarray, start: int, stop: int,

@@ -1,0 +1,86 @@
+"""The per-user cache of compiled kernels (asrbf_mesh._jit_cache)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from asrbf_mesh import _jit_cache as jc
+
+PACKAGE = Path(jc.__file__).resolve().parent
+
+
+def test_the_key_follows_every_source_file_not_the_location(tmp_path: Path) -> None:
+    a, b = tmp_path / "a" / "pkg", tmp_path / "b" / "pkg"
+    for root in (a, b):
+        (root / "sub").mkdir(parents=True)
+        (root / "k.py").write_text("x = 1\n")
+        (root / "sub" / "m.py").write_text("y = 2\n")
+    assert jc.tree_key(a) == jc.tree_key(b)  # another clone of the same source
+    (b / "sub" / "m.py").write_text("y = 3\n")  # a kernel's callee in another file
+    assert jc.tree_key(a) != jc.tree_key(b)
+    (b / "sub" / "m.py").write_text("y = 2\n")
+    (b / "sub" / "m.py").rename(b / "m.py")  # same contents, another file
+    assert jc.tree_key(a) != jc.tree_key(b)
+
+
+@pytest.mark.skipif(bool(os.environ.get("NUMBA_CACHE_DIR")), reason="NUMBA_CACHE_DIR wins")
+def test_the_kernels_are_cached_in_the_package_directory() -> None:
+    from asrbf_mesh import _learn_kernels, _network_kernels
+    from asrbf_mesh.evaluate import _som_kernels
+
+    for kernel in (_learn_kernels.run_steps, _network_kernels.build_grid,
+                   _som_kernels.__dict__[next(n for n, v in vars(_som_kernels).items()
+                                              if hasattr(v, "_cache"))]):
+        path = Path(kernel._cache._cache_path)
+        assert path.is_relative_to(jc.cache_dir()), path
+
+
+def test_a_fresh_copy_of_the_source_finds_the_kernels_compiled(tmp_path: Path) -> None:
+    """Another clone (or environment) on the same machine: no compilation, a cache hit."""
+    probe = ("import sys; from asrbf_mesh import _learn_heap as h; import numpy as np\n"
+             "k = np.zeros(4, np.int64)\n"
+             "h._heap_push(k, k.copy(), k.copy(), np.int64(0), np.int64(1), np.int64(2),"
+             " np.int64(3))\n"
+             "assert h.__file__.startswith(sys.argv[1]), h.__file__\n"
+             "print(sum(h._heap_push.stats.cache_hits.values()),"
+             " sum(h._heap_push.stats.cache_misses.values()))\n")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["ASRBF_CACHE_DIR"] = str(tmp_path / "cache")
+    counts = []
+    for clone in ("one", "two"):
+        root = tmp_path / clone
+        shutil.copytree(PACKAGE, root / "asrbf_mesh",
+                        ignore=shutil.ignore_patterns("__pycache__"))
+        out = subprocess.run([sys.executable, "-c", probe, str(root)], cwd=root, env=env,
+                             capture_output=True, text=True, check=True)
+        counts.append(tuple(int(v) for v in out.stdout.split()))
+    assert counts[0] == (0, 1)  # the first copy compiles
+    assert counts[1] == (1, 0)  # the second loads what the first compiled
+    assert len(list((tmp_path / "cache").glob("kernels-*"))) == 1
+
+
+def test_old_source_versions_are_pruned_when_idle(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("ASRBF_CACHE_DIR", str(tmp_path))
+    old = time.time() - 3 * 86400
+    dirs = []
+    for i in range(jc.KEEP + 3):
+        d = tmp_path / f"kernels-old{i}"
+        d.mkdir()
+        os.utime(d, (old + i, old + i))
+        dirs.append(d)
+    recent = tmp_path / "kernels-recent"
+    recent.mkdir()  # beyond KEEP by age order too, but used today: kept
+    os.utime(recent, (old - 10, old - 10))
+    os.utime(recent)  # now
+    jc._prune()
+    left = {p.name for p in tmp_path.glob("kernels-*")}
+    newest = {d.name for d in dirs[-(jc.KEEP - 1):]}  # recent is the newest of all
+    assert "kernels-recent" in left and newest <= left
+    assert len(left) == jc.KEEP
