@@ -356,8 +356,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"  wrote {d['footprint_mesh']} ({d['footprint_vertices']:,} vertices, footprint of "
           "the scan)")
     print(f"  wrote {d['full_mesh']} ({d['full_vertices']:,} vertices, whole normalized square)")
-    print("  (the first run after installing compiles the numba kernels, about 10 s before "
-          "the fit, and caches them: later runs start at once)")
+    print("  (the first run on a machine compiles the numba kernels, about 10 s before the "
+          "fit, into a per-user cache: later runs, and other installs of this version, start "
+          "at once)")
     return 0
 
 
