@@ -391,6 +391,14 @@ def test_blocked_evaluation_matches_brute_force_on_every_path(k, widths) -> None
     np.testing.assert_array_equal(net.evaluate(many[perm], unit=True), f[perm])
     few = many[probe[:50]]  # below SERIAL_BELOW; on the fine grid, fewer points than cells
     np.testing.assert_array_equal(net.evaluate(few, unit=True), f[probe[:50]])
+    import numba  # one thread: other blocks, the same values
+
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        np.testing.assert_array_equal(net.evaluate(many, unit=True), f)
+    finally:
+        numba.set_num_threads(threads)
 
 
 def test_build_grid_cells_hold_every_neuron_reaching_them() -> None:
