@@ -157,16 +157,15 @@ def _values_block(pts, b0, b1, out, a0, packed, pstart, supp2, lo, h, g):
     px, py, inv, a = packed[0], packed[1], packed[2], packed[3]
     if 4 * (b1 - b0) < g * g:  # few points on a fine grid: one by one
         for i in range(b0, b1):
-            c = _cell(pts[i, 1], lo[1], h, g) * g + _cell(pts[i, 0], lo[0], h, g)
+            x, y, c = _locate(pts, i, lo, h, g)
             s0 = pstart[c]
             s1 = pstart[c + 1]
-            out[i] = a0 + _cell_sum(pts[i, 0], pts[i, 1], px[s0:s1], py[s0:s1], inv[s0:s1],
-                                    a[s0:s1], supp2)
+            out[i] = a0 + _cell_sum(x, y, px[s0:s1], py[s0:s1], inv[s0:s1], a[s0:s1], supp2)
         return
     count = np.zeros(g * g + 1, np.int64)
     cell = np.empty(b1 - b0, np.int64)
     for i in range(b0, b1):
-        c = _cell(pts[i, 1], lo[1], h, g) * g + _cell(pts[i, 0], lo[0], h, g)
+        _, _, c = _locate(pts, i, lo, h, g)
         cell[i - b0] = c
         count[c + 1] += 1
     for c in range(g * g):

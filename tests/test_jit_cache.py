@@ -35,9 +35,8 @@ def test_the_kernels_are_cached_in_the_package_directory() -> None:
     from asrbf_mesh import _learn_kernels, _network_kernels
     from asrbf_mesh.evaluate import _som_kernels
 
-    for kernel in (_learn_kernels.run_steps, _network_kernels.build_grid,
-                   _som_kernels.__dict__[next(n for n, v in vars(_som_kernels).items()
-                                              if hasattr(v, "_cache"))]):
+    som = next(v for v in vars(_som_kernels).values() if hasattr(v, "_cache"))
+    for kernel in (_learn_kernels.run_steps, _network_kernels.build_grid, som):
         path = Path(kernel._cache._cache_path)
         assert path.is_relative_to(jc.cache_dir()), path
 
