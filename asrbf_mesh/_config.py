@@ -27,7 +27,7 @@ VIEW_AXES = ("z", "x", "y", "pca")
 #: How a hole fill carries the scan's residual across the hole.
 BLENDS = ("thin-plate", "harmonic")
 #: Footprint modes of ``reconstruct``.
-FOOTPRINT_MODES = ("scan", "hull", "full")
+FOOTPRINT_MODES = ("scan", "surface", "hull", "full")
 #: ``pieces`` of a fit: "auto" (one network per smooth piece) or "1" (one network).
 PIECES = ("auto", "1")
 #: LOD methods of ``lod_set``.

@@ -45,6 +45,12 @@ def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) 
     return tri
 
 
+#: Mode ``surface`` still covers the holes no wider than this many sampling spacings both
+#: ways (a missing sample or two, a gap of a bare cloud's triangulation): a pinhole is
+#: sampling, not a hole of the surface.
+PINHOLE = 4.0
+
+
 @dataclass(frozen=True, eq=False)
 class Footprint:
     """Raster of the xy plane: 0 where the scan's triangles cover it, else a region label.
@@ -97,17 +103,36 @@ class Footprint:
     @classmethod
     def of_points(cls, xy: np.ndarray, faces: np.ndarray | None, spacing: float, *,
                   mode: str = "scan") -> Footprint:
-        """Footprint of a scan: its own triangles (``scan``) or a concave hull (``hull``).
+        """Footprint of a scan: its own triangles (``scan``, ``surface``) or a concave hull.
 
+        ``scan`` is the triangles and the holes they enclose, ``surface`` the triangles
+        alone (holes stay open, but pinholes: :data:`PINHOLE`), both from the scan's
+        triangles or a tight triangulation (edges up to 2.5 x spacing) of a bare cloud.
         ``hull`` triangulates the points in xy keeping edges up to 8 x spacing (an alpha
-        shape), which also bridges the scan's bays and notches; ``scan`` uses the scan's
-        triangles, or a tight triangulation (edges up to 2.5 x spacing) of a bare cloud.
+        shape), which also bridges the scan's bays and notches.
         """
         if mode == "hull":
             faces = point_cloud_faces(xy, spacing, max_edge=8.0)
         elif faces is None or len(faces) == 0:
             faces = point_cloud_faces(xy, spacing)
-        return cls.of(xy, faces, spacing)
+        fp = cls.of(xy, faces, spacing)
+        return fp.without_holes(PINHOLE * spacing) if mode == "surface" else fp
+
+    def without_holes(self, smaller: float) -> Footprint:
+        """Return this footprint with its holes outside, but those narrower than ``smaller``.
+
+        A hole whose raster bounding box is at most ``smaller`` wide both ways (a missing
+        sample or two of a range grid, a gap of a bare cloud's triangulation) stays a
+        hole; every other uncovered region becomes the outside (label 1).
+        """
+        keep = np.zeros(int(self.labels.max()) + 1, dtype=bool)
+        limit = smaller / self.cell
+        for k, box in zip(range(1, len(keep)), ndimage.find_objects(self.labels), strict=False):
+            if box is not None and k not in self.outside and all(
+                    sl.stop - sl.start <= limit for sl in box):
+                keep[k] = True
+        lab = np.where(keep[self.labels], 2, np.minimum(self.labels, 1))
+        return Footprint(self.lo, self.cell, lab.astype(self.labels.dtype), frozenset({1}))
 
     @classmethod
     def of(cls, xy: np.ndarray, faces: np.ndarray, spacing: float, *,

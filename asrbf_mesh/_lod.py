@@ -11,8 +11,9 @@ from the learned representation:
 
 Level 0 is the finest; the index grows with coarseness (the usual LOD convention, and
 the one of the ``2**i`` formulas above). :func:`lod_set` returns the levels in that
-order, finest first. Every level is meshed on the scan's footprint, so its border
-stays where the scan's border is (within about a grid cell's diagonal of that level).
+order, finest first. Every level is meshed on the scan's own triangles, so its border
+and its holes stay where the scan's are (within about a grid cell's diagonal of that
+level); ``fill_holes=True`` meshes the holes the scan encloses too.
 
 :func:`write_lod_set` writes the meshes, the networks and a ``manifest.json`` with
 sizes and Metro-style errors against the scan, optionally beside quadric-decimation
@@ -248,7 +249,7 @@ def _check_coarsest(levels: int, span: np.ndarray, spacings: Any) -> None:
 def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resample",
             net: Network | None = None, seed: int = 0, d_mins: list[float] | None = None,
             footprint: bool = True, base_resolution: int | None = None,
-            pieces: str | int = "auto") -> list[LodLevel]:
+            pieces: str | int = "auto", fill_holes: bool = False) -> list[LodLevel]:
     """Build a set of levels of detail of a range scan.
 
     Parameters
@@ -277,9 +278,17 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     d_mins : sequence of float, optional
         ``refit``: the D_min of each level (unit square), non-decreasing.
     footprint : bool
-        Mesh only the scan's footprint (its triangles and the holes they enclose:
-        :func:`~asrbf_mesh._surface.reconstruct` mode ``scan``), so the border stays the
-        scan's. False: the whole normalized square.
+        Mesh only the scan's footprint (its triangles: :func:`~asrbf_mesh.reconstruct`
+        mode ``surface``), so the border and the holes stay the scan's. False: the whole
+        normalized square.
+    fill_holes : bool
+        With ``footprint``: also mesh the holes the scan's triangles enclose (mode
+        ``scan``), the network's surface over them. Off by default: a level then stays on
+        the scan, which gave the level sets of BENCHMARKS "LOD sets of the piecewise
+        model" an RMS that never falls with the level (on 12 of 12 scans and seeds,
+        against 10 of 15 with the holes filled, where the fill's distance to the scan,
+        not the level's error, decided the order) and a mesh-to-scan 99.9th percentile of
+        0.42-0.80 % of the diagonal (face 2.18 % with its eyes and nostrils filled).
     base_resolution : int, optional
         Samples along the longer side of the level-0 grid, instead of the default
         spacing above; coarser levels scale it by ``2**i`` (``resample``) or by
@@ -343,12 +352,17 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
     if net is not None and not isinstance(net, Network):
         raise ConfigError(f"net must be a Network, got {type(net).__name__}")
     check_bool(footprint, "footprint")
+    check_bool(fill_holes, "fill_holes")
+    if fill_holes and not footprint:
+        raise ConfigError("fill_holes applies with footprint=True only (the whole square "
+                          "has no holes)")
     if d_mins is not None and method != "refit":
         raise ConfigError("d_mins applies to method 'refit' only")
     sc = _as_scan(scan)
     # every cell touching the footprint: a fragment or strip narrower than a coarse cell
     # keeps its surface (the mesh's outer nodes end on the scan, see reconstruct)
-    fp_kw: dict[str, Any] = ({"footprint": sc, "mode": "scan", "coverage": "any"}
+    fp_kw: dict[str, Any] = ({"footprint": sc, "mode": "scan" if fill_holes else "surface",
+                              "coverage": "any"}
                              if footprint else {})
 
     if method == "resample":

@@ -62,17 +62,22 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         scan's own sampling spacing if known, else 200 samples along the longer side of
         the area meshed.
     footprint : Scan or (N, 3) array, optional
-        The scan whose footprint limits the mesh (modes ``scan`` and ``hull``).
-    mode : {"scan", "hull", "full"}, optional
-        ``scan``: the grid cells on the scan's triangles or inside its holes (so holes
-        come out filled); ``hull``: inside a concave hull of the points (bays and
-        notches of the border bridged too); ``full``: the whole normalized square,
-        extended by ``margin_rel`` (the network's extrapolation, paper Fig. 3).
-        Default: ``scan`` with a footprint, else ``full``.
+        The scan whose footprint limits the mesh (modes ``surface``, ``scan``, ``hull``).
+    mode : {"surface", "scan", "hull", "full"}, optional
+        ``surface``: the grid cells on the scan's triangles (the scan's holes stay
+        open); ``scan``: those and the cells inside its holes (so holes come out
+        filled by the network, paper section 4.1); ``hull``: inside a concave hull of
+        the points (bays and notches of the border bridged too); ``full``: the whole
+        normalized square, extended by ``margin_rel`` (the network's extrapolation,
+        paper Fig. 3). Default: ``surface`` with a footprint, else ``full``: a
+        reconstruction stays on the scan unless asked to fill (the fill's distance to
+        the scan is no error of the surface; on the face map, whose eyes and nostrils
+        are holes, it held the mesh-to-scan 99.9th percentile at 2.0 % of the diagonal,
+        0.45 % without; BENCHMARKS "Piecewise model vs the single network").
     margin_rel : float
         Extend the full square by this fraction on every side (mode ``full``).
     coverage : {"centre", "any"}
-        Modes ``scan`` and ``hull``: mesh the grid cells whose centre lies on the
+        Modes ``surface``, ``scan`` and ``hull``: mesh the grid cells whose centre lies on the
         footprint (``centre``), or every cell that touches it (``any``: no fragment or
         strip narrower than a cell is lost, at the price of up to one cell beyond the
         border; coarse grids such as LOD levels want it).
@@ -107,7 +112,7 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     frame = net.frame
     span = frame.scale[:2]
     if mode is None:
-        mode = "full" if footprint is None else "scan"
+        mode = "full" if footprint is None else "surface"
     mode = check_choice(mode, "mode", FOOTPRINT_MODES)
     if mode != "full" and footprint is None:
         raise ConfigError(f"mode {mode!r} needs the scan as footprint")

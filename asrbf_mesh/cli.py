@@ -482,6 +482,9 @@ def _lod_options(lo: argparse.ArgumentParser, full: bool = True) -> None:
                          "simplification and pymeshlab quadric edge collapse)")
     lo.add_argument("--no-metro", dest="metro", action="store_false",
                     help="skip the Metro error measures")
+    lo.add_argument("--fill-holes", action="store_true",
+                    help="also mesh the holes the scan encloses (the network's surface "
+                         "over them) [default: the scan's surface only, holes open]")
     _add_pieces(lo)
     _add_range(lo)
     if full:
@@ -538,9 +541,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--spacing", type=float, help="grid spacing in scan units")
     r.add_argument("--footprint", help="the scan whose footprint limits the mesh")
     r.add_argument("--mode", choices=FOOTPRINT_MODES, default=None,
-                   help="scan: cells with data plus the holes they enclose; hull: a concave "
-                        "hull of the points; full: the whole normalized square "
-                        "[default: scan with --footprint, else full]")
+                   help="surface: the cells with data (holes stay open); scan: those plus "
+                        "the holes they enclose; hull: a concave hull of the points; full: "
+                        "the whole normalized square [default: surface with --footprint, "
+                        "else full]")
     r.add_argument("--margin", type=float, default=0.0,
                    help="mode full: extend the square by this fraction per side [default: 0]")
     r.add_argument("--json", action="store_true")

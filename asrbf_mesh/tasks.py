@@ -186,9 +186,9 @@ def _check_reconstruct(*, resolution: int | None, spacing: float | None, mode: s
     if mode is not None:
         check_choice(mode, "mode", FOOTPRINT_MODES)
     check_float(margin, "margin", low=0.0, high=10.0, high_open=True)
-    used = mode or ("full" if footprint is None else "scan")
+    used = mode or ("full" if footprint is None else "surface")
     if margin != 0 and used != "full":
-        why = "" if mode else " (a footprint meshes mode scan unless mode is given)"
+        why = "" if mode else " (a footprint meshes mode surface unless mode is given)"
         raise ConfigError(f"margin applies to mode full only: mode {used} follows the scan's "
                           f"border{why}")
 
@@ -310,8 +310,9 @@ def _fill_grid_task(grid: Any, net: Network | None, out: Path, mask: Any, max_ho
 
 
 def _check_lod(*, levels: int, method: str, compare_qem: bool, metro: bool,
-               seed: int, pieces: Any = "auto") -> None:
+               seed: int, pieces: Any = "auto", fill_holes: bool = False) -> None:
     check_choice(pieces, "pieces", PIECES)
+    check_bool(fill_holes, "fill_holes")
     check_int(levels, "levels", 1, MAX_LEVELS)
     check_choice(method, "method", LOD_METHODS)
     check_bool(compare_qem, "compare_qem")
@@ -321,21 +322,23 @@ def _check_lod(*, levels: int, method: str, compare_qem: bool, metro: bool,
 
 def lod(scan: str | os.PathLike, output: str | os.PathLike, *, levels: int = 4,
         method: str = "resample", compare_qem: bool = False, metro: bool = True,
-        seed: int = 0, pieces: str = "auto",
+        seed: int = 0, pieces: str = "auto", fill_holes: bool = False,
         range_options: dict[str, Any] | None = None) -> dict[str, Any]:
     """``asrbf lod``: write a level-of-detail set and its manifest into the folder ``output``.
 
-    Returns the manifest. ``metro=False`` skips the Metro error measures.
+    Returns the manifest. ``metro=False`` skips the Metro error measures; ``fill_holes``
+    meshes the holes the scan encloses too (every level).
     """
     from ._lod import lod_set
     from .evaluate import write_lod_set
 
     _check_lod(levels=levels, method=method, compare_qem=compare_qem, metro=metro, seed=seed,
-               pieces=pieces)
+               pieces=pieces, fill_holes=fill_holes)
     data = load_scan(scan, options=range_options)
     out = check_output_dir(output)
     with atomic_dir(out, LOD_FILES) as tmp:
-        lods = lod_set(data, levels=levels, method=method, seed=seed, pieces=pieces)
+        lods = lod_set(data, levels=levels, method=method, seed=seed, pieces=pieces,
+                       fill_holes=fill_holes)
         manifest = write_lod_set(data, lods, tmp, compare_qem=compare_qem, metro=metro)
     return jsonable(manifest)
 

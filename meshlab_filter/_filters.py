@@ -43,7 +43,7 @@ __all__ = [
 #: The fitted networks of the layers, shared by all filters (see :class:`NetworkCache`).
 cache = NetworkCache(maxsize=8)
 
-_MODES = {"footprint": "scan", "hull": "hull", "full": "full"}
+_MODES = {"surface": "surface", "footprint": "scan", "hull": "hull", "full": "full"}
 
 
 def _label(m: pymeshlab.Mesh, mesh_id: int) -> str:
@@ -142,9 +142,11 @@ def _close_holes(ms: pymeshlab.MeshSet, p: dict[str, Any]) -> dict[str, Any]:
             "holes_skipped": sorted(skipped, key=lambda s: s["index"]), "mesh_id": new_id}
 
 
-def _base_resolution(net: Network, scan: Scan, target: int, footprint: bool) -> int:
+def _base_resolution(net: Network, scan: Scan, target: int, footprint: bool,
+                     fill_holes: bool) -> int:
     """Grid resolution whose footprint mesh has about ``target`` faces (two probes)."""
-    kw: dict[str, Any] = {"footprint": scan, "mode": "scan"} if footprint else {}
+    kw: dict[str, Any] = ({"footprint": scan, "mode": "scan" if fill_holes else "surface"}
+                          if footprint else {})
     r = 64
     for _ in range(2):
         faces = reconstruct(net, resolution=r, **kw).n_faces
@@ -156,9 +158,11 @@ def _lod(ms: pymeshlab.MeshSet, p: dict[str, Any]) -> dict[str, Any]:
     m, mesh_id, scan, net = _fitted(ms, "generate_lod_set_asrbf", p)
     base = None
     if p["targetfacenum"]:
-        base = _base_resolution(net, scan, p["targetfacenum"], p["footprint"])
+        base = _base_resolution(net, scan, p["targetfacenum"], p["footprint"],
+                                p["fillholes"])
     levels = lod_set(scan, levels=p["levels"], method=p["method"], net=net, seed=p["seed"],
-                     footprint=p["footprint"], base_resolution=base, pieces=p["pieces"])
+                     footprint=p["footprint"], base_resolution=base, pieces=p["pieces"],
+                     fill_holes=p["fillholes"] and p["footprint"])
     label = _label(m, mesh_id)
     ids = [add_layer(ms, lv.mesh, f"{label} (asrbf LOD {lv.index})") for lv in levels]
     return {"mesh_ids": ids, "faces": [lv.mesh.n_faces for lv in levels],

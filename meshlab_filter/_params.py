@@ -285,10 +285,11 @@ FILTERS: dict[str, FilterSpec] = {spec.name: spec for spec in (
         "scan, z = f(x, y) in its view frame) and adds the network's surface, meshed on a "
         "regular grid, as a new layer '<source> (asrbf surface)'.",
         (
-            Param("mode", "enum", "footprint", "Where to mesh: 'footprint' (the scan's "
-                  "triangles and the holes they enclose), 'hull' (a concave hull of the "
-                  "points) or 'full' (the whole bounding square of the points).",
-                  choices=("footprint", "hull", "full")),
+            Param("mode", "enum", "surface", "Where to mesh: 'surface' (the scan's "
+                  "triangles; its holes stay open), 'footprint' (the scan's triangles and "
+                  "the holes they enclose, filled by the network), 'hull' (a concave hull "
+                  "of the points) or 'full' (the whole bounding square of the points).",
+                  choices=("surface", "footprint", "hull", "full")),
             Param("resolution", "int", 0, "Grid samples along the longer side of the "
                   "points' extent; 0: the scan's own sampling spacing.", minimum=2,
                   special=0),
@@ -335,8 +336,10 @@ FILTERS: dict[str, FilterSpec] = {spec.name: spec for spec in (
             Param("targetfacenum", "int", 0, "About this many faces at level 0 (coarser "
                   "levels scale with it); 0: level 0 at the scan's own sampling spacing.",
                   minimum=1, special=0),
-            Param("footprint", "bool", True, "Mesh only the scan's footprint (its triangles "
-                  "and the holes they enclose); False: the whole bounding square."),
+            Param("footprint", "bool", True, "Mesh only the scan's footprint (its "
+                  "triangles); False: the whole bounding square."),
+            Param("fillholes", "bool", False, "With 'footprint': also mesh the holes the "
+                  "scan's triangles enclose (the network's surface over them)."),
             _SEED,
             _PIECES,
             _VIEWAXIS,

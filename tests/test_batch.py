@@ -219,7 +219,7 @@ def test_task_options_become_task_keywords() -> None:
 
     assert task_options("lod", "--levels 3 --no-metro --compare-qem") == {
         "levels": 3, "method": "resample", "compare_qem": True, "metro": False,
-        "pieces": "auto"}
+        "fill_holes": False, "pieces": "auto"}
     fit = task_options("fit", "--passes 2 --update gd")
     assert fit["passes"] == 2 and fit["update"] == "gd" and fit["progress"] is False
     assert task_options("compare", "")["meshes"] is True

@@ -148,8 +148,25 @@ def test_without_footprint_the_whole_square_is_meshed(scan, resampled) -> None:
     assert level.mesh.n_faces > resampled[0].mesh.n_faces
 
 
+def test_holes_stay_open_unless_fill_holes(syn, resampled) -> None:
+    base = franke_scan(syn)
+    c = base.points[base.faces].mean(axis=1)
+    keep = np.hypot(c[:, 0] - 130, c[:, 1] - 45) > 8  # a hole of radius 8 mm
+    holed = am.Scan(base.points, base.faces[keep])
+    net = resampled[0].network
+    open_ = lod_set(holed, levels=2, net=net)
+    filled = lod_set(holed, levels=2, net=net, fill_holes=True)
+    for a, b in zip(open_, filled, strict=True):
+        da = np.hypot(*(a.mesh.vertices[:, :2] - [130, 45]).T)
+        db = np.hypot(*(b.mesh.vertices[:, :2] - [130, 45]).T)
+        assert db.min() < 2.0 < 4.0 < da.min()  # the fill reaches the centre; open: not
+        assert a.mesh.n_faces < b.mesh.n_faces
+
+
 @pytest.mark.parametrize(("kwargs", "message"), [
     ({"levels": 0}, "levels must be an integer >= 1"),
+    ({"fill_holes": 1}, "fill_holes must be True or False"),
+    ({"fill_holes": True, "footprint": False}, "fill_holes applies with footprint=True"),
     ({"method": "bogus"}, "method must be one of resample, refit"),
     ({"d_mins": [0.01, 0.02]}, "d_mins applies to method 'refit' only"),
     ({"method": "refit", "levels": 2, "d_mins": [0.02]}, r"one D_min per level \(2\), got 1"),

@@ -202,13 +202,13 @@ def test_values_out_of_range_are_refused(ms, name, params, match) -> None:
 
 def test_enums_take_a_name_or_an_index_like_pymeshlab(ms) -> None:
     with pytest.raises(pymeshlab.InvalidEnumException,
-                       match="^Enum 'nope' not found. Possible values are 'footprint'; "
-                             "'hull'; 'full'; ") as info:
+                       match="^Enum 'nope' not found. Possible values are 'surface'; "
+                             "'footprint'; 'hull'; 'full'; ") as info:
         mf.apply_filter(ms, "generate_surface_reconstruction_asrbf", mode="nope")
     assert isinstance(info.value, pymeshlab.PyMeshLabException)
     with pytest.raises(mf.InvalidEnumError):
         mf.apply_filter(ms, "generate_lod_set_asrbf", method=5)
-    mf.apply_filter(ms, "generate_surface_reconstruction_asrbf", mode=2, resolution=11)
+    mf.apply_filter(ms, "generate_surface_reconstruction_asrbf", mode=3, resolution=11)
     lo, hi = ms.current_mesh().vertex_matrix().min(0), ms.current_mesh().vertex_matrix().max(0)
     assert np.allclose([lo[0], lo[1], hi[0], hi[1]], [100, 20, 180, 80])  # 'full'
 

@@ -142,7 +142,7 @@ def test_margin_extends_the_square(franke_net: am.Network) -> None:
 
 def test_scan_mode_fills_the_hole_and_keeps_the_rest(holed) -> None:
     pts, net = holed
-    mesh = reconstruct(net, resolution=81, footprint=pts)  # mode "scan": holes included
+    mesh = reconstruct(net, resolution=81, footprint=pts, mode="scan")  # holes included
     full = reconstruct(net, resolution=81)
     # the interior hole is meshed: cells with data plus the holes they enclose
     d = np.linalg.norm(mesh.vertices[:, :2] - HOLE_CENTRE, axis=1)
@@ -162,6 +162,24 @@ def test_scan_mode_fills_the_hole_and_keeps_the_rest(holed) -> None:
     assert mesh.faces.max() < mesh.n_vertices
     assert np.all(signed_areas(mesh) > 0)
     assert len(np.unique(mesh.faces)) == mesh.n_vertices  # no unused vertex
+
+
+def test_default_footprint_mode_keeps_the_scans_hole_open(holed) -> None:
+    pts, net = holed
+    mesh = reconstruct(net, resolution=81, footprint=pts)  # mode "surface"
+    filled = reconstruct(net, resolution=81, footprint=pts, mode="scan")
+    hole_r = np.linalg.norm(pts[:, :2] - HOLE_CENTRE, axis=1).min()  # the hole's radius
+    d = np.linalg.norm(mesh.vertices[:, :2] - HOLE_CENTRE, axis=1)
+    assert d.min() > 0.5 * hole_r  # nothing meshed deep inside the hole
+    # everything else is the filled mesh's: same vertices away from the hole
+    fr = net.frame
+    inner = np.all((filled.vertices[:, :2] > fr.offset[:2] + 0.03 * fr.scale[:2])
+                   & (filled.vertices[:, :2] < fr.offset[:2] + 0.97 * fr.scale[:2]), axis=1)
+    far = inner & (np.linalg.norm(filled.vertices[:, :2] - HOLE_CENTRE, axis=1) > 1.5 * hole_r)
+    kept = {tuple(v) for v in np.round(mesh.vertices[:, :2], 9)}
+    assert all(tuple(v) in kept for v in np.round(filled.vertices[far, :2], 9))
+    assert mesh.n_vertices < filled.n_vertices
+    assert np.all(signed_areas(mesh) > 0)
 
 
 def test_scan_mode_leaves_a_border_notch_open_hull_bridges_it(syn) -> None:

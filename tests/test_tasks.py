@@ -320,7 +320,7 @@ def test_report_counts_a_scan_once(capsys, scan: Path, net: Path, tmp_path: Path
     (["reconstruct", "{net}", "-o", "{tmp}/m.ply", "--mode", "hull", "--footprint", "{scan}",
       "--margin", "0.1"], "margin applies to mode full only: mode hull"),
     (["reconstruct", "{net}", "-o", "{tmp}/m.ply", "--footprint", "{scan}", "--margin", "0.1"],
-     "margin applies to mode full only: mode scan"),
+     "margin applies to mode full only: mode surface"),
 ])
 def test_options_that_would_be_ignored_are_refused(capsys, scan: Path, net: Path,
                                                    tmp_path: Path, argv, match) -> None:
