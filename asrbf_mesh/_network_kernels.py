@@ -300,3 +300,37 @@ def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, 
                     vals[n] = phi
                     n += 1
     return indptr, cols, vals
+
+
+@njit(cache=True, nogil=True)
+def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
+    """Add design rows' normal equations into dense ``ata`` (upper triangle) and ``atr``.
+
+    Rows in CSR form ``(indptr, cols, vals)`` (:func:`design_rows`, not full). Adds
+    ``A'A`` into the upper triangle of ``ata`` (entry ``[min(p, q), max(p, q)]``) and
+    ``A'(z - A w0)`` into ``atr``, both only where a column is ``>= first`` (``first = 0``:
+    every entry); returns the sum of ``|z - A w0|``. Rows are added one after another
+    in order, so blocks of rows give the same sums bit for bit as the rows at once.
+    """
+    m = indptr.shape[0] - 1
+    total = 0.0
+    for i in range(m):
+        a = indptr[i]
+        b = indptr[i + 1]
+        r = z[i]
+        for p in range(a, b):
+            r -= vals[p] * w0[cols[p]]
+        total += abs(r)
+        for p in range(a, b):
+            cp = cols[p]
+            vp = vals[p]
+            if cp >= first:
+                atr[cp] += vp * r
+            for q in range(p, b):
+                cq = cols[q]
+                if cp >= first or cq >= first:
+                    if cp <= cq:
+                        ata[cp, cq] += vp * vals[q]
+                    else:
+                        ata[cq, cp] += vp * vals[q]
+    return total

@@ -42,8 +42,9 @@ _DIRECT_MAX = 4096  # unknowns up to which the weight polish factorizes (see _so
 class PolishResult:
     """Polished parameters (unit cube) and the mean absolute error before and after.
 
-    The weight polish also keeps its normal equations (``ata`` = A'A and ``atz`` = A'z
-    over the columns ``[a0, a_1 .. a_K]``, without the ridge), so that neurons can be
+    The weight polish also keeps its normal equations (``ata`` = A'A, a dense array up
+    to :data:`DENSE_MAX` columns, else CSR, and ``atz`` = A'z over the columns
+    ``[a0, a_1 .. a_K]``, without the ridge), so that neurons can be
     added later at the cost of the rows under them only (:func:`extend_and_solve`).
     """
 
@@ -54,7 +55,7 @@ class PolishResult:
     ebar_before: float
     ebar_after: float
     iterations: int
-    ata: sp.csr_matrix | None = None
+    ata: np.ndarray | sp.csr_matrix | None = None
     atz: np.ndarray | None = None
 
 
@@ -72,13 +73,69 @@ def design_matrix(xy: np.ndarray, centers: np.ndarray, widths: np.ndarray,
     >>> A.toarray().round(4).tolist()
     [[1.0, 1.0], [1.0, 0.0]]
     """
-    pts = np.ascontiguousarray(xy, dtype=np.float64)
-    _, lo, h, g, start, items, _, _ = eval_grid(centers, widths, weights, support)
-    indptr, cols, vals = _nk.design_rows(pts, centers, widths, weights, support, lo, h, g,
-                                         start, items, full)
-    n = len(pts)
+    grid = eval_grid(centers, widths, weights, support)
+    indptr, cols, vals = _design_rows(grid, xy, centers, widths, weights, full)
     ncol = 1 + (4 if full else 1) * len(widths)
-    return sp.csr_matrix((vals, cols, indptr), shape=(n, ncol))
+    return sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, ncol))
+
+
+def _design_rows(grid: tuple, xy: np.ndarray, centers: np.ndarray, widths: np.ndarray,
+                 weights: np.ndarray, full: bool = False) -> tuple:
+    """Return the design matrix's CSR arrays ``(indptr, cols, vals)`` through a grid."""
+    support, lo, h, g, start, items, _, _ = grid
+    pts = np.ascontiguousarray(xy, dtype=np.float64)
+    return _nk.design_rows(pts, centers, widths, weights, support, lo, h, g, start, items,
+                           full)
+
+
+#: Normal equations of up to this many unknowns are summed into a dense matrix by a
+#: compiled kernel (32 MB at most); above, scipy's sparse products sum them.
+DENSE_MAX = 2049
+
+
+class _Normal:
+    """Normal equations ``A'A``, ``A'(z - A w0)`` summed over blocks of design rows.
+
+    Dense up to :data:`DENSE_MAX` unknowns (:func:`~asrbf_mesh._network_kernels.gram_rows`:
+    each row's outer product, no sparse product), sparse above. ``first``: only the
+    entries in a column ``>= first`` (the columns of appended neurons).
+    """
+
+    def __init__(self, k1: int, w0: np.ndarray, first: int = 0):
+        self.k1, self.w0, self.first = k1, np.ascontiguousarray(w0, np.float64), first
+        self.dense = np.zeros((k1, k1)) if k1 <= DENSE_MAX else None
+        self.sparse = sp.csr_matrix((k1, k1))
+        self.atr = np.zeros(k1)
+        self.abs_sum = 0.0
+
+    def add(self, rows: tuple, z: np.ndarray) -> None:
+        indptr, cols, vals = rows
+        z = np.ascontiguousarray(z, np.float64)
+        if self.dense is not None:
+            self.abs_sum += _nk.gram_rows(indptr, cols, vals, z, self.w0, self.first,
+                                          self.dense, self.atr)
+            return
+        A = sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, self.k1))
+        r = z - A @ self.w0
+        self.abs_sum += float(np.abs(r).sum())
+        At = A.T.tocsr()
+        ata, atr = (At @ A).tocoo(), At @ r
+        if self.first:  # keep the entries in a new column
+            keep = (ata.row >= self.first) | (ata.col >= self.first)
+            ata = sp.coo_matrix((ata.data[keep], (ata.row[keep], ata.col[keep])),
+                                shape=ata.shape)
+            atr[:self.first] = 0.0
+        self.sparse = self.sparse + ata.tocsr()
+        self.atr += atr
+
+    def matrix(self) -> np.ndarray | sp.csr_matrix:
+        """``A'A``, symmetric: a dense array up to :data:`DENSE_MAX` unknowns, else CSR."""
+        if self.dense is None:
+            return self.sparse.tocsr()
+        d = self.dense
+        d += np.triu(d, 1).T  # the kernel filled the upper triangle
+        self.dense = None
+        return d
 
 
 def _predict(xy, a0, centers, widths, weights, support) -> np.ndarray:
@@ -138,32 +195,25 @@ def polish_weights_blocks(blocks: Callable[[], Iterable[tuple[np.ndarray, np.nda
     w0 = np.concatenate([[a0], weights])
     # the normal equations are summed over chunks of points: memory O(K + chunk), never
     # the whole (N, K) design matrix (16 bytes per point and neuron over it)
-    ata = sp.csr_matrix((len(w0), len(w0)))
-    atr = np.zeros(len(w0))
-    before = 0.0
+    grid = eval_grid(centers, widths, weights, support)
+    normal = _Normal(len(w0), w0)
     for xy_b, z_b in blocks():
         for sl in _chunks(len(z_b)):
-            A = design_matrix(xy_b[sl], centers, widths, weights, support)
-            r = z_b[sl] - A @ w0
-            before += float(np.abs(r).sum())
-            At = A.T.tocsr()
-            ata = ata + At @ A
-            atr += At @ r
-    before /= n
-    diag = ata.diagonal()
-    lam = max(ridge, _RIDGE_FLOOR) * float(diag.mean())
+            normal.add(_design_rows(grid, xy_b[sl], centers, widths, weights), z_b[sl])
+    before = normal.abs_sum / n
+    ata, atr = normal.matrix(), normal.atr
     # solve for the change: (A'A + lam) dw = A'(z - A w0)
-    dw = _solve_spd(ata + sp.diags(np.full(len(w0), lam)), atr)
+    dw = _solve_spd(_ridged(ata, ridge), atr)
     w = w0 + dw
-    ata = ata.tocsr()
     atz = atr + ata @ w0
     if not np.all(np.isfinite(w)):
         return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
     after = 0.0
+    grid = eval_grid(centers, widths, w[1:], support)  # (the grid packs the weights)
     for xy_b, z_b in blocks():
         for sl in _chunks(len(z_b)):
-            A = design_matrix(xy_b[sl], centers, widths, weights, support)
-            after += float(np.abs(A @ w - z_b[sl]).sum())
+            after += float(np.abs(eval_unit(grid, xy_b[sl], w[0], centers, widths,
+                                            w[1:])[0] - z_b[sl]).sum())
     after /= n
     if after > before:
         return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
@@ -196,13 +246,21 @@ def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
         return PolishResult(a0, centers, widths, weights, before, before, 0, pr.ata, pr.atz)
     tree = cKDTree(xy) if points is None else points
     rows = rows_under(tree, centers[k_old:], widths[k_old:], support)
-    A = design_matrix(xy[rows], centers, widths, weights, support)
-    new = A[:, 1 + k_old:]
-    cross = (A[:, :1 + k_old].T @ new).tocsr()
-    ata = sp.bmat([[pr.ata, cross], [cross.T, (new.T @ new)]], format="csr")
-    atz = np.concatenate([pr.atz, new.T @ z[rows]])
-    lam = max(ridge, _RIDGE_FLOOR) * float(ata.diagonal().mean())
-    w = w0 + _solve_spd(ata + sp.diags(np.full(len(w0), lam)), atz - ata @ w0)
+    grid = eval_grid(centers, widths, weights, support)
+    normal = _Normal(len(w0), np.zeros(len(w0)), first=1 + k_old)  # A'z: no offset
+    for sl in _chunks(len(rows)):
+        normal.add(_design_rows(grid, xy[rows[sl]], centers, widths, weights), z[rows[sl]])
+    ata = normal.matrix()
+    if isinstance(ata, np.ndarray):
+        ata[:1 + k_old, :1 + k_old] += _dense(pr.ata)
+    else:
+        old = sp.csr_matrix(pr.ata)  # padded with the new (empty) rows and columns
+        old = sp.csr_matrix((old.data, old.indices,
+                             np.r_[old.indptr, np.full(m, old.indptr[-1])]),
+                            shape=(len(w0),) * 2)
+        ata = (old + ata).tocsr()
+    atz = np.concatenate([pr.atz, normal.atr[1 + k_old:]])
+    w = w0 + _solve_spd(_ridged(ata, ridge), atz - ata @ w0)
     if not np.all(np.isfinite(w)):
         return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
     after = float(np.abs(z - _predict(xy, w[0], centers, widths, w[1:], support)).mean())
@@ -212,29 +270,62 @@ def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
                         atz)
 
 
+def _ridged(ata: np.ndarray | sp.spmatrix, ridge: float) -> np.ndarray | sp.spmatrix:
+    """``A'A + lam I`` with ``lam = ridge * mean(diag(A'A))`` (a new matrix)."""
+    lam = max(ridge, _RIDGE_FLOOR) * float(ata.diagonal().mean())
+    if isinstance(ata, np.ndarray):
+        out = ata.copy()
+        out[np.diag_indices_from(out)] += lam
+        return out
+    return ata + sp.diags(np.full(ata.shape[0], lam))
+
+
+def _dense(m: np.ndarray | sp.spmatrix) -> np.ndarray:
+    return m if isinstance(m, np.ndarray) else m.toarray()
+
+
 def rows_under(points, centers: np.ndarray, widths: np.ndarray, support: float) -> np.ndarray:
     """Sorted indices of the points within the truncated support of any of the neurons.
 
     ``points`` is a :class:`scipy.spatial.cKDTree` of the points (unit square).
     """
-    near = points.query_ball_point(centers, support * widths)
-    return np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in near]
-                                    + [np.zeros(0, np.int64)]))
+    n = points.n
+    if len(widths) == 0:
+        return np.zeros(0, np.int64)
+    under = np.zeros(n, dtype=bool)
+    near = points.query_ball_point(centers, support * widths, return_sorted=False)
+    under[np.concatenate([np.asarray(r, dtype=np.int64) for r in near])] = True
+    return np.flatnonzero(under)
 
 
-def _solve_spd(mat: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
+def _solve_spd(mat: sp.spmatrix | np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve the symmetric positive definite system ``mat x = rhs``.
 
-    Sparse LU (SuperLU) up to :data:`_DIRECT_MAX` unknowns; above, Jacobi-preconditioned
-    conjugate gradients to a relative residual of 1e-12, because the LU factor's fill
-    grows faster than K on these 2D neighbourhoods (7.8 million entries, 120 MB, at
-    K = 3,600) while CG needs only the matrix (0.5 million entries there; 3,300
-    iterations, 1.6 s, the same solution to 1e-10).
+    Dense Cholesky (LAPACK, one thread) up to :data:`DENSE_MAX` unknowns: 10 ms at
+    K = 954 where SuperLU took 30 ms (the face map's normal equations, 10 % filled);
+    sparse LU (SuperLU) up to :data:`_DIRECT_MAX` (or when Cholesky finds the matrix
+    not positive definite); above, Jacobi-preconditioned conjugate gradients to a
+    relative residual of 1e-12, because the LU factor's fill grows faster than K on
+    these 2D neighbourhoods (7.8 million entries, 120 MB, at K = 3,600) while CG needs
+    only the matrix (0.5 million entries there; 3,300 iterations, 1.6 s, the same
+    solution to 1e-10).
     """
-    if mat.shape[0] <= _DIRECT_MAX:
+    import scipy.linalg as sla
+
+    n = mat.shape[0]
+    if n <= DENSE_MAX:
+        dense = mat if isinstance(mat, np.ndarray) else mat.toarray()
+        # one BLAS thread: see drop_idle
+        with _blas_controller().limit(limits=1, user_api="blas"):
+            chol, info = sla.lapack.dpotrf(dense, lower=1)
+            if info == 0:
+                x, info = sla.lapack.dpotrs(chol, np.asarray(rhs, np.float64), lower=1)
+        if info == 0:
+            return x
+    mat = sp.csr_matrix(mat)
+    if n <= _DIRECT_MAX:
         return spsolve(mat.tocsc(), rhs)
-    mat = mat.tocsr()
-    x, _ = cg(mat, rhs, rtol=1e-12, atol=0.0, maxiter=20 * mat.shape[0],
+    x, _ = cg(mat, rhs, rtol=1e-12, atol=0.0, maxiter=20 * n,
               M=sp.diags(1.0 / mat.diagonal(), format="csr"))
     return x
 
@@ -356,18 +447,17 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
     if pr.ata is None or pr.atz is None or k < 2 or k > IDLE_MAX_NEURONS \
             or pr.ata.shape[0] != k + 1:
         return pr, 0
-    ata = pr.ata.tocsr()
+    ata = _dense(pr.ata)
     keep = np.arange(k)
     w = np.concatenate([[pr.a0], pr.weights])
     for _ in range(rounds):
         cols = np.concatenate([[0], 1 + keep])
-        sub = ata[cols][:, cols]
-        lam = max(ridge, _RIDGE_FLOOR) * float(sub.diagonal().mean())
+        sub = _ridged(ata[np.ix_(cols, cols)], ridge)
         # one BLAS thread: worker threads left spinning after a threaded factorization
         # took the cores from the numba kernels that follow it (the piecewise fit of
         # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without)
         with _blas_controller().limit(limits=1, user_api="blas"):
-            chol, info = sla.lapack.dpotrf(sub.toarray() + lam * np.eye(len(cols)), lower=1)
+            chol, info = sla.lapack.dpotrf(sub, lower=1)
             if info == 0:
                 inv, info = sla.lapack.dpotri(chol, lower=1)
         if info != 0:
@@ -376,20 +466,18 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
         cand = np.flatnonzero(score < limit)
         if len(cand) == 0:
             break
-        near = sub[1:, 1:].tocsr()  # neurons sharing a point have a non-zero entry
+        near = sub[1:, 1:] != 0  # neurons sharing a point have a non-zero entry
         blocked = np.zeros(len(keep), dtype=bool)
         drop = []
         for j in cand[np.argsort(score[cand], kind="stable")]:
             if not blocked[j]:
                 drop.append(j)
-                blocked[near.indices[near.indptr[j]:near.indptr[j + 1]]] = True
+                blocked[near[j]] = True
         keep = np.delete(keep, drop)
         cols = np.concatenate([[0], 1 + keep])
-        sub = ata[cols][:, cols]
-        lam = max(ridge, _RIDGE_FLOOR) * float(sub.diagonal().mean())
+        sub = ata[np.ix_(cols, cols)]
         w_sub = w[cols]
-        w_sub = w_sub + _solve_spd(sub + sp.diags(np.full(len(cols), lam)),
-                                   pr.atz[cols] - sub @ w_sub)
+        w_sub = w_sub + _solve_spd(_ridged(sub, ridge), pr.atz[cols] - sub @ w_sub)
         if not np.all(np.isfinite(w_sub)):
             return pr, 0
         w = np.zeros_like(w)
@@ -402,4 +490,4 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
     if after > pr.ebar_after * (1.0 + tolerance):
         return pr, 0
     return PolishResult(float(w[0]), centers, widths, weights.copy(), pr.ebar_before, after,
-                        pr.iterations, ata[cols][:, cols].tocsr(), pr.atz[cols]), k - len(keep)
+                        pr.iterations, ata[np.ix_(cols, cols)], pr.atz[cols]), k - len(keep)

@@ -200,8 +200,8 @@ def test_fit_polish_modes(syn) -> None:
     assert nets["weights"].info["polish_seconds"] >= 0
 
 
-def test_weight_polish_is_the_same_in_chunks(learned, monkeypatch) -> None:
-    # the normal equations summed over blocks of points equal the one-block sum
+def test_weight_polish_is_the_same_in_chunks_bit_for_bit(learned, monkeypatch) -> None:
+    # the compiled kernel adds the rows one after another: chunks cannot change a bit
     import asrbf_mesh._polish as P
 
     hf, st = learned
@@ -209,8 +209,50 @@ def test_weight_polish_is_the_same_in_chunks(learned, monkeypatch) -> None:
     whole = polish_weights(*args)
     monkeypatch.setattr(P, "_CHUNK", 97)
     chunked = polish_weights(*args)
-    np.testing.assert_allclose(chunked.weights, whole.weights, rtol=1e-9, atol=1e-12)
-    assert chunked.ebar_after == pytest.approx(whole.ebar_after, rel=1e-9)
+    np.testing.assert_array_equal(chunked.weights, whole.weights)
+    np.testing.assert_array_equal(chunked.ata, whole.ata)
+
+
+def test_dense_normal_equations_equal_the_sparse_ones(learned, monkeypatch) -> None:
+    # the compiled dense sum (up to DENSE_MAX unknowns) against scipy's sparse products
+    import scipy.sparse as sp
+
+    import asrbf_mesh._polish as P
+
+    hf, st = learned
+    args = (hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5)
+    dense = polish_weights(*args)
+    assert isinstance(dense.ata, np.ndarray)
+    A = design_matrix(hf.xy, st.centers, st.widths, st.weights, 3.5)
+    np.testing.assert_allclose(dense.ata, (A.T @ A).toarray(), rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(dense.atz, A.T @ hf.z, rtol=1e-10, atol=1e-9)
+    monkeypatch.setattr(P, "DENSE_MAX", 1)  # the sparse path
+    sparse = polish_weights(*args)
+    assert sp.issparse(sparse.ata)
+    np.testing.assert_allclose(sparse.ata.toarray(), dense.ata, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(sparse.weights, dense.weights, rtol=1e-7, atol=1e-9)
+
+
+@pytest.mark.parametrize("dense_max", [1, 2049])
+def test_extend_and_solve_equals_a_polish_of_all_neurons(learned, monkeypatch,
+                                                         dense_max: int) -> None:
+    # appended neurons: the extended normal equations are those of the whole network
+    import asrbf_mesh._polish as P
+    from asrbf_mesh._polish import extend_and_solve
+
+    monkeypatch.setattr(P, "DENSE_MAX", dense_max)
+    hf, st = learned
+    k = len(st.widths) - 5
+    first = polish_weights(hf.xy, hf.z, st.a0, st.centers[:k], st.widths[:k],
+                           st.weights[:k], 3.5)
+    weights = np.r_[first.weights, st.weights[k:]]
+    got = extend_and_solve(hf.xy, hf.z, first, first.a0, st.centers, st.widths, weights, 3.5)
+    ref = polish_weights(hf.xy, hf.z, first.a0, st.centers, st.widths, weights, 3.5)
+    dense = got.ata if isinstance(got.ata, np.ndarray) else got.ata.toarray()
+    ref_ata = ref.ata if isinstance(ref.ata, np.ndarray) else ref.ata.toarray()
+    np.testing.assert_allclose(dense, ref_ata, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(got.atz, ref.atz, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(got.weights, ref.weights, rtol=1e-6, atol=1e-8)
 
 
 def test_large_systems_are_solved_by_conjugate_gradients() -> None:
