@@ -406,7 +406,7 @@ def _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt
 # --- the learning loop --------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_active, miss,
               hk, hs, hg, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l_prv, l_cell, l_lev,
               lev_off, lev_count, wbuf, Pg, log_t, log_k, log_rms, log_sig, log_amp, start):

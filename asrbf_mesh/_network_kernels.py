@@ -40,7 +40,7 @@ def _offset(x, y, centers, widths, j):
     return dx, dy, dx * dx + dy * dy, widths[j] * widths[j]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def build_grid(centers, widths, support, lo, h, g):
     """CSR lists ``(start, items)`` of the neurons meeting each of the g x g cells."""
     k = centers.shape[0]
@@ -103,7 +103,7 @@ def _exp_neg(t):
 PAD = 8
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pack_cells(centers, widths, weights, start, items):
     """Neuron parameters in cell-list order, each list padded to :data:`PAD` entries.
 
@@ -193,7 +193,7 @@ def _values_block(pts, b0, b1, out, a0, packed, pstart, supp2, lo, h, g):
 SERIAL_BELOW = 8192
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def _values_parallel(pts, a0, packed, pstart, support, lo, h, g, threads):
     m = pts.shape[0]
     out = np.empty(m)
@@ -206,7 +206,7 @@ def _values_parallel(pts, a0, packed, pstart, support, lo, h, g, threads):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _values_serial(pts, a0, packed, pstart, support, lo, h, g):
     m = pts.shape[0]
     out = np.empty(m)
@@ -224,7 +224,7 @@ def evaluate_values(pts, a0, packed, pstart, support, lo, h, g):
     return _values_parallel(pts, a0, packed, pstart, support, lo, h, g, get_num_threads())
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def evaluate_with_gradient(pts, a0, centers, widths, weights, support, lo, h, g, start, items):
     """Evaluate f (M,) and its gradient df/dx, df/dy (M, 2) at unit-square points (M, 2)."""
     m = pts.shape[0]
@@ -250,7 +250,7 @@ def evaluate_with_gradient(pts, a0, centers, widths, weights, support, lo, h, g,
     return out, grad
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, full):
     """Sparse Jacobian of f at ``pts`` in CSR form ``(indptr, indices, data)``.
 
@@ -334,3 +334,16 @@ def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
                     else:
                         ata[cq, cp] += vp * vals[q]
     return total
+
+
+@njit(cache=True, parallel=True)
+def _warm_threads(n):
+    out = np.zeros(n)
+    for i in prange(n):
+        out[i] = i
+    return out
+
+
+def warm_threads() -> None:
+    """Run a tiny parallel kernel: numba picks its threading layer on the first one."""
+    _warm_threads(2)

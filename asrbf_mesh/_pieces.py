@@ -38,7 +38,8 @@ from ._polish import drop_idle, extend_and_solve, polish_weights
 from ._segment import Segmentation
 from ._validate import progress as progress_bar
 
-__all__ = ["PiecesLearned", "learn_pieces", "piece_seed", "refine_tails", "small_piece"]
+__all__ = ["PiecesLearned", "learn_pieces", "parallel_pieces", "piece_seed", "refine_tails",
+           "small_piece"]
 
 #: Tail refinement: points whose error exceeds this multiple of E get neurons.
 TAIL_FACTOR = 0.8
@@ -94,9 +95,14 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
                  seed: int, progress: bool | None = None) -> PiecesLearned:
     """Learn every piece of ``segmentation`` (rows of ``hf``) with piece seeds of ``seed``.
 
-    Pieces are learned one after another (largest first for the progress bar's sake,
-    each with :func:`piece_seed` of its own index, so the order does not change a bit).
+    Each piece learns with :func:`piece_seed` of its own index and nothing of the
+    others, so neither the order nor the thread changes a bit. Largest first; on two
+    threads or more (and a numba threading layer that lets two Python threads launch
+    parallel kernels, :func:`parallel_pieces`) two pieces learn at once: while the
+    largest learns, the next ones do.
     """
+    from concurrent.futures import ThreadPoolExecutor
+
     absres = np.empty(hf.n_points)
     polish_gain = 0.0  # sum over points of |f - z| before the polish minus after it
     order = np.argsort(segmentation.labels, kind="stable")
@@ -104,40 +110,31 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
     pieces: list[Piece | None] = [None] * segmentation.n_pieces
     steps, learn_s, polish_s, d_min = 0, 0.0, 0.0, float("nan")
     sizes = segmentation.sizes
-    learned_points = int(sizes[~segmentation.small & (sizes >= MIN_POINTS)].sum())
-    tick = progress_bar(learned_points * cfg.passes, progress, "learning pieces", unit="step")
-    for i in np.argsort(-segmentation.sizes, kind="stable"):
+    learned = ~segmentation.small & (sizes >= MIN_POINTS)
+    tick = progress_bar(int(sizes[learned].sum()) * cfg.passes, progress, "learning pieces",
+                        unit="step")
+
+    def one(i: int) -> tuple:
         idx = order[bounds[i]:bounds[i + 1]]
-        sub = HeightField(hf.xy[idx], hf.z[idx], hf.frame, hf.spacing, hf.fold)
-        info: dict[str, Any] = {"n_points": sub.n_points, "seed": piece_seed(seed, int(i))}
-        if segmentation.small[i] or sub.n_points < MIN_POINTS:
-            # a small network is a least-squares fit: without a polish, a constant
-            piece = small_piece(sub, cfg, info, constant=polish == "none")
-            seq = None
-        else:
-            learned, pr, params, seconds = learn_polished(
-                sub, cfg, polish, seed=info["seed"], progress=False,
-                prune_below=TAIL_PRUNE * cfg.error_threshold)
-            if polish != "none":
-                tr = time.perf_counter()
-                params, info["tail_neurons"] = refine_tails(sub, cfg, *params, learned.d_min,
-                                                            pr)
-                info["weak_pruned"] = (len(learned.widths) + info["tail_neurons"]
-                                       - len(params[2]))
-                seconds += time.perf_counter() - tr
-            piece = Piece(*params, learned.log, info)
-            seq = None if pr is None else pr.ebar_before * sub.n_points
-            steps += learned.steps
-            learn_s += learned.seconds
-            polish_s += seconds
-            d_min = learned.d_min
-            if tick:
-                tick(learned.steps)
-        res = np.abs(sub.z - piece.eval_unit(sub.xy, cfg.support)[0])
+        return (idx, *_learn_piece(HeightField(hf.xy[idx], hf.z[idx], hf.frame, hf.spacing,
+                                               hf.fold), bool(segmentation.small[i]), cfg,
+                                   polish, piece_seed(seed, i), tick))
+
+    big_first = [int(i) for i in np.argsort(-sizes, kind="stable")]
+    if int(learned.sum()) >= 2 and parallel_pieces():
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            results = list(pool.map(one, big_first))
+    else:
+        results = [one(i) for i in big_first]
+    for i, (idx, piece, res, seq, learned_piece, seconds) in zip(big_first, results, strict=True):
         absres[idx] = res
         if seq is not None:
             polish_gain += seq - float(res.sum())
-        piece.info["ebar"] = float(res.mean())
+        if learned_piece is not None:
+            steps += learned_piece.steps
+            learn_s += learned_piece.seconds
+            polish_s += seconds
+            d_min = learned_piece.d_min
         pieces[i] = piece
     if np.isnan(d_min):  # every piece is a constant: report the rule's D_min all the same
         d_min = min(cfg.d_min if cfg.d_min is not None
@@ -146,6 +143,57 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
     return PiecesLearned(tuple(pieces), pm, absres,  # type: ignore[arg-type]
                          float(absres.mean()) + polish_gain / hf.n_points, steps, d_min,
                          learn_s, polish_s)
+
+
+def _learn_piece(sub: HeightField, small: bool, cfg: FitConfig, polish: str, seed: int,
+                 tick: Any) -> tuple:
+    """Learn, polish and refine one piece.
+
+    Returns ``(piece, |f - z| per point, |f - z| summed before the polish, learning
+    result, polish seconds)``. A small piece (or one too small to learn) gets
+    :func:`small_piece`; then the sum and the learning result are None.
+    """
+    info: dict[str, Any] = {"n_points": sub.n_points, "seed": seed}
+    seq, learned, seconds = None, None, 0.0
+    if small or sub.n_points < MIN_POINTS:
+        piece = small_piece(sub, cfg, info, constant=polish == "none")
+    else:
+        learned, pr, params, seconds = learn_polished(
+            sub, cfg, polish, seed=seed, progress=False,
+            prune_below=TAIL_PRUNE * cfg.error_threshold)
+        if polish != "none":
+            tr = time.perf_counter()
+            params, info["tail_neurons"] = refine_tails(sub, cfg, *params, learned.d_min, pr)
+            info["weak_pruned"] = len(learned.widths) + info["tail_neurons"] - len(params[2])
+            seconds += time.perf_counter() - tr
+        piece = Piece(*params, learned.log, info)
+        seq = None if pr is None else pr.ebar_before * sub.n_points
+        if tick:
+            tick(learned.steps)
+    res = np.abs(sub.z - piece.eval_unit(sub.xy, cfg.support)[0])
+    piece.info["ebar"] = float(res.mean())
+    return piece, res, seq, learned, seconds
+
+
+def parallel_pieces() -> bool:
+    """Whether pieces may learn on two threads at once.
+
+    When numba runs on two threads or more (a batch worker pinned to one does not) and
+    its threading layer is OpenMP or TBB: those let several Python threads launch
+    parallel kernels at once; the workqueue layer does not (it aborts the process).
+    """
+    import numba
+
+    from . import _network_kernels as _nk
+
+    if numba.get_num_threads() < 2:
+        return False
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # no parallel kernel has run yet: run one
+        _nk.warm_threads()
+        layer = numba.threading_layer()
+    return layer in ("omp", "tbb")
 
 
 def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,

@@ -16,7 +16,9 @@ and over holes -- where learning left them instead of letting them explode.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -316,7 +318,7 @@ def _solve_spd(mat: sp.spmatrix | np.ndarray, rhs: np.ndarray) -> np.ndarray:
     if n <= DENSE_MAX:
         dense = mat if isinstance(mat, np.ndarray) else mat.toarray()
         # one BLAS thread: see drop_idle
-        with _blas_controller().limit(limits=1, user_api="blas"):
+        with _one_blas_thread():
             chol, info = sla.lapack.dpotrf(dense, lower=1)
             if info == 0:
                 x, info = sla.lapack.dpotrs(chol, np.asarray(rhs, np.float64), lower=1)
@@ -418,6 +420,18 @@ def polish_full(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
 IDLE_MAX_NEURONS = 2048
 
 
+#: Held while BLAS is limited to one thread: the limit is process-wide, and two pieces
+#: polished on two threads would otherwise restore each other's limits out of order.
+_BLAS_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _one_blas_thread():
+    """Run the block with BLAS on one thread (one block at a time in the process)."""
+    with _BLAS_LOCK, _blas_controller().limit(limits=1, user_api="blas"):
+        yield
+
+
 @functools.cache
 def _blas_controller():
     """Return the process's BLAS libraries, inspected once (an inspection costs 1-2 ms)."""
@@ -456,7 +470,7 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
         # one BLAS thread: worker threads left spinning after a threaded factorization
         # took the cores from the numba kernels that follow it (the piecewise fit of
         # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without)
-        with _blas_controller().limit(limits=1, user_api="blas"):
+        with _one_blas_thread():
             chol, info = sla.lapack.dpotrf(sub, lower=1)
             if info == 0:
                 inv, info = sla.lapack.dpotri(chol, lower=1)

@@ -94,6 +94,23 @@ def test_same_seed_same_bytes_and_a_file_round_trip(fitted, tmp_path) -> None:
     assert net.pieces[0].info["seed"] == piece_seed(0, 0) != piece_seed(0, 1)
 
 
+def test_pieces_on_two_threads_give_the_same_bytes_as_one_after_another(
+        fitted, tmp_path, monkeypatch) -> None:
+    import asrbf_mesh._pieces as P
+
+    scan, net = fitted
+    calls = []
+    real = P.parallel_pieces
+    monkeypatch.setattr(P, "parallel_pieces", lambda: calls.append(1) or real())
+    threaded = am.fit(scan, seed=0, progress=False)
+    assert calls  # two learned pieces: the question was asked
+    monkeypatch.setattr(P, "parallel_pieces", lambda: False)
+    serial = am.fit(scan, seed=0, progress=False)
+    a = threaded.save(tmp_path / "threaded.asrbf").read_bytes()
+    assert a == serial.save(tmp_path / "serial.asrbf").read_bytes()
+    assert a == net.save(tmp_path / "net.asrbf").read_bytes()
+
+
 def test_a_one_piece_scan_learns_as_the_single_network_then_refines(tmp_path) -> None:
     pts, faces = height_grid(lambda x, y: np.sin(x / 9.0) * np.cos(y / 7.0), 40, 30)
     scan = am.Scan(pts, faces)
