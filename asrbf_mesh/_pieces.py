@@ -305,17 +305,13 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
 def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: np.ndarray,
                    cfg: FitConfig, points) -> np.ndarray:
     """Least-squares weights of new neurons for the residual under them (ridge as the polish)."""
-    from ._piece import eval_grid
-    from ._polish import _chunks, _design_rows, _Normal, _ridged, _solve_spd, rows_under
+    from ._polish import _normal_under, _ridged, _solve_spd, rows_under
 
     rows = rows_under(points, centers, sigma, cfg.support)
     if len(rows) == 0:
         return np.zeros(len(sigma))
-    ones = np.ones(len(sigma))
-    grid = eval_grid(centers, sigma, ones, cfg.support)
-    normal = _Normal(len(sigma) + 1, np.zeros(len(sigma) + 1), first=1)  # no bias column
-    for sl in _chunks(len(rows)):
-        normal.add(_design_rows(grid, xy[rows[sl]], centers, sigma, ones), res[rows[sl]])
+    normal = _normal_under(xy, res, rows, centers, sigma, np.ones(len(sigma)), cfg.support,
+                           1)  # the new neurons' columns, no bias
     ata = normal.matrix()[1:, 1:]
     a = _solve_spd(_ridged(ata, cfg.polish_ridge), normal.atr[1:])
     return np.where(np.isfinite(a), a, 0.0)

@@ -106,7 +106,8 @@ class _Normal:
     def __init__(self, k1: int, w0: np.ndarray, first: int = 0):
         self.k1, self.w0, self.first = k1, np.ascontiguousarray(w0, np.float64), first
         self.dense = np.zeros((k1, k1)) if k1 <= DENSE_MAX else None
-        self.sparse = sp.csr_matrix((k1, k1))
+        self.sparse = None if self.dense is not None else sp.csr_matrix((k1, k1))
+        self.mirrored = False
         self.atr = np.zeros(k1)
         self.abs_sum = 0.0
 
@@ -114,6 +115,7 @@ class _Normal:
         indptr, cols, vals = rows
         z = np.ascontiguousarray(z, np.float64)
         if self.dense is not None:
+            assert not self.mirrored, "rows added after matrix()"
             self.abs_sum += _nk.gram_rows(indptr, cols, vals, z, self.w0, self.first,
                                           self.dense, self.atr)
             return
@@ -134,10 +136,21 @@ class _Normal:
         """``A'A``, symmetric: a dense array up to :data:`DENSE_MAX` unknowns, else CSR."""
         if self.dense is None:
             return self.sparse.tocsr()
-        d = self.dense
-        d += np.triu(d, 1).T  # the kernel filled the upper triangle
-        self.dense = None
-        return d
+        if not self.mirrored:  # the kernel filled the upper triangle
+            self.dense += np.triu(self.dense, 1).T
+            self.mirrored = True
+        return self.dense
+
+
+def _normal_under(xy: np.ndarray, z: np.ndarray, rows: np.ndarray, centers: np.ndarray,
+                  widths: np.ndarray, weights: np.ndarray, support: float,
+                  first: int) -> _Normal:
+    """``A'A`` and ``A'z`` over the points ``rows``, entries in a column ``>= first`` only."""
+    grid = eval_grid(centers, widths, weights, support)
+    normal = _Normal(len(widths) + 1, np.zeros(len(widths) + 1), first=first)  # A'z
+    for sl in _chunks(len(rows)):
+        normal.add(_design_rows(grid, xy[rows[sl]], centers, widths, weights), z[rows[sl]])
+    return normal
 
 
 def _predict(xy, a0, centers, widths, weights, support) -> np.ndarray:
@@ -248,10 +261,7 @@ def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
         return PolishResult(a0, centers, widths, weights, before, before, 0, pr.ata, pr.atz)
     tree = cKDTree(xy) if points is None else points
     rows = rows_under(tree, centers[k_old:], widths[k_old:], support)
-    grid = eval_grid(centers, widths, weights, support)
-    normal = _Normal(len(w0), np.zeros(len(w0)), first=1 + k_old)  # A'z: no offset
-    for sl in _chunks(len(rows)):
-        normal.add(_design_rows(grid, xy[rows[sl]], centers, widths, weights), z[rows[sl]])
+    normal = _normal_under(xy, z, rows, centers, widths, weights, support, 1 + k_old)
     ata = normal.matrix()
     if isinstance(ata, np.ndarray):
         ata[:1 + k_old, :1 + k_old] += _dense(pr.ata)
@@ -283,6 +293,7 @@ def _ridged(ata: np.ndarray | sp.spmatrix, ridge: float) -> np.ndarray | sp.spma
 
 
 def _dense(m: np.ndarray | sp.spmatrix) -> np.ndarray:
+    """Return ``m`` as a dense array (itself when it is one)."""
     return m if isinstance(m, np.ndarray) else m.toarray()
 
 
@@ -316,10 +327,9 @@ def _solve_spd(mat: sp.spmatrix | np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
     n = mat.shape[0]
     if n <= DENSE_MAX:
-        dense = mat if isinstance(mat, np.ndarray) else mat.toarray()
         # one BLAS thread: see drop_idle
         with _one_blas_thread():
-            chol, info = sla.lapack.dpotrf(dense, lower=1)
+            chol, info = sla.lapack.dpotrf(_dense(mat), lower=1)
             if info == 0:
                 x, info = sla.lapack.dpotrs(chol, np.asarray(rhs, np.float64), lower=1)
         if info == 0:
@@ -417,7 +427,7 @@ def polish_full(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
 
 
 #: :func:`drop_idle` inverts the normal equations densely up to this many neurons.
-IDLE_MAX_NEURONS = 2048
+IDLE_MAX_NEURONS = DENSE_MAX - 1
 
 
 #: Held while BLAS is limited to one thread: the limit is process-wide, and two pieces
