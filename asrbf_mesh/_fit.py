@@ -117,21 +117,26 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     if isinstance(pieces, Segmentation) and pieces.n_points != len(points):
         raise ConfigError(f"pieces: the segmentation has {pieces.n_points:,} points, the scan "
                           f"{len(points):,}")
-    stray = isolated_points(points)
-    n_stray = int(stray.sum())
-    fitted = points
-    if n_stray:  # stray returns would set the frame and pull the surface: leave them out
-        warnings.warn(describe_isolated(points, stray, named), OutlierWarning, stacklevel=2)
-        fitted = points[~stray]
-        if len(fitted) < MIN_POINTS:
-            raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points that are not "
-                            f"isolated, got {len(fitted)}")
     t0 = time.perf_counter()
-    # the cut into pieces runs beside the frame and sampling measures (both mostly
-    # KD-tree queries and compiled kernels that release the GIL): on two cores it hides
-    # most of the segmentation's time
+    # the cut into pieces runs beside the search for isolated points, the frame and the
+    # sampling measures (mostly KD-tree queries and compiled kernels that release the
+    # GIL): on two cores it hides the segmentation's time. It is cut again without the
+    # isolated points when there are some (rare: real scans have none)
     with ThreadPoolExecutor(max_workers=1) as pool:
-        cut = pool.submit(_segmentation, pieces, fitted, faces, stray, view_axis)
+        none = np.zeros(len(points), dtype=bool)
+        cut = pool.submit(_segmentation, pieces, points, faces, none, view_axis)
+        stray = isolated_points(points)
+        n_stray = int(stray.sum())
+        fitted = points
+        if n_stray:  # stray returns would set the frame and pull the surface: leave them out
+            warnings.warn(describe_isolated(points, stray, named), OutlierWarning,
+                          stacklevel=2)
+            fitted = points[~stray]
+            if len(fitted) < MIN_POINTS:
+                raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points that are "
+                                f"not isolated, got {len(fitted)}")
+            cut.cancel()
+            cut = pool.submit(_segmentation, pieces, fitted, faces, stray, view_axis)
         try:
             hf = to_height_field(fitted, view_axis=view_axis)  # type: ignore[arg-type]
         except ScanError as exc:  # (leaving the block waits for the cut: no stray thread)

@@ -261,15 +261,18 @@ def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, 
     m = pts.shape[0]
     supp2 = support * support
     per = 4 if full else 1
-    indptr = np.zeros(m + 1, np.int64)
-    for i in range(m):
+    counts = np.empty(m, np.int64)
+    for i in prange(m):
         x, y, c = _locate(pts, i, lo, h, g)
         cnt = 1
         for p in range(start[c], start[c + 1]):
             _, _, d2, s2 = _offset(x, y, centers, widths, items[p])
             if d2 < supp2 * s2:  # the same test as the fill below, to the last bit
                 cnt += per
-        indptr[i + 1] = indptr[i] + cnt
+        counts[i] = cnt
+    indptr = np.zeros(m + 1, np.int64)
+    for i in range(m):
+        indptr[i + 1] = indptr[i] + counts[i]
     nnz = indptr[m]
     cols = np.empty(nnz, np.int64)
     vals = np.empty(nnz)
@@ -302,15 +305,37 @@ def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, 
     return indptr, cols, vals
 
 
+@njit(cache=True, parallel=True, nogil=True)
+def under_any(pts, centers, widths, support, lo, h, g, start, items):
+    """Whether each point lies in the truncated support of any of the neurons.
+
+    The same test as :func:`design_rows`, to the last bit: a point is under a neuron
+    exactly when its design row has that neuron's column.
+    """
+    m = pts.shape[0]
+    supp2 = support * support
+    out = np.zeros(m, dtype=np.bool_)
+    for i in prange(m):
+        x, y, c = _locate(pts, i, lo, h, g)
+        for p in range(start[c], start[c + 1]):
+            _, _, d2, s2 = _offset(x, y, centers, widths, items[p])
+            if d2 < supp2 * s2:
+                out[i] = True
+                break
+    return out
+
+
 @njit(cache=True, nogil=True)
 def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
-    """Add design rows' normal equations into dense ``ata`` (upper triangle) and ``atr``.
+    """Add design rows' normal equations into dense ``ata`` and ``atr``.
 
-    Rows in CSR form ``(indptr, cols, vals)`` (:func:`design_rows`, not full). Adds
-    ``A'A`` into the upper triangle of ``ata`` (entry ``[min(p, q), max(p, q)]``) and
-    ``A'(z - A w0)`` into ``atr``, both only where a column is ``>= first`` (``first = 0``:
-    every entry); returns the sum of ``|z - A w0|``. Rows are added one after another
-    in order, so blocks of rows give the same sums bit for bit as the rows at once.
+    Rows in CSR form ``(indptr, cols, vals)`` (:func:`design_rows`, not full). With
+    ``first = 0`` adds ``A'A`` into the upper triangle of ``ata`` (entry
+    ``[min(p, q), max(p, q)]``); with ``first > 0`` only the rows ``p >= first`` of
+    ``A'A``, whole (the columns of appended neurons, by symmetry). Adds ``A'(z - A w0)``
+    into ``atr`` where a column is ``>= first``; returns the sum of ``|z - A w0|``.
+    Rows are added one after another in order, so blocks of rows give the same sums bit
+    for bit as the rows at once.
     """
     m = indptr.shape[0] - 1
     total = 0.0
@@ -321,6 +346,16 @@ def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
         for p in range(a, b):
             r -= vals[p] * w0[cols[p]]
         total += abs(r)
+        if first > 0:  # the whole rows p >= first of A'A, written along the row
+            for p in range(a, b):
+                cp = cols[p]
+                if cp < first:
+                    continue
+                vp = vals[p]
+                atr[cp] += vp * r
+                for q in range(a, b):
+                    ata[cp, cols[q]] += vp * vals[q]
+            continue
         for p in range(a, b):
             cp = cols[p]
             vp = vals[p]
@@ -334,6 +369,69 @@ def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
                     else:
                         ata[cq, cp] += vp * vals[q]
     return total
+
+
+@njit(cache=True, nogil=True)
+def eliminate(minv, w, limit, budget):
+    """Greedy backward elimination of least-squares unknowns, one at a time, exactly.
+
+    ``minv``'s lower triangle holds the (n, n) inverse of a least-squares problem's
+    (ridged) normal matrix ``M`` (the upper triangle is not read) and ``w`` is its
+    solution (updated in place). Unknown 0 (the bias) always stays. Each step removes
+    the unknown ``j`` whose removal raises the objective least, ``w_j^2 / (M^-1)_jj``,
+    while that rise is under ``limit`` and the rises summed stay within ``budget``;
+    the others are solved again by the
+    Schur-complement update ``w -= (M^-1)_{:j} w_j / (M^-1)_jj``, and the inverse of the
+    remaining matrix is ``M^-1`` minus the removed columns' rank-one terms, kept as rows
+    of ``u`` (``O(n r)`` per step after ``r`` removals, never ``O(n^2)``). Ties go to
+    the lowest index. Returns the removed indices, in order.
+    """
+    n = w.shape[0]
+    diag = np.empty(n)
+    for i in range(n):
+        diag[i] = minv[i, i]
+    alive = np.ones(n, dtype=np.bool_)
+    alive[0] = False
+    u = np.empty((max(n - 1, 0), n))
+    dropped = np.empty(max(n - 1, 0), dtype=np.int64)
+    c = np.empty(n)
+    r = 0
+    while r < n - 1:
+        best = -1
+        score = limit
+        for j in range(1, n):
+            if alive[j] and diag[j] > 0.0:
+                s = w[j] * w[j] / diag[j]
+                if s < score:
+                    score = s
+                    best = j
+        if best < 0 or score > budget:
+            break
+        j = best
+        alive[j] = False
+        for i in range(j):
+            c[i] = minv[j, i]
+        for i in range(j, n):
+            c[i] = minv[i, j]
+        for t in range(r):
+            f = u[t, j]
+            if f != 0.0:
+                for i in range(n):
+                    c[i] -= f * u[t, i]
+        d = c[j]
+        if not d > 1e-14 * minv[j, j]:  # lost to rounding: keep the unknown
+            continue
+        f = w[j] / d
+        g = 1.0 / np.sqrt(d)
+        for i in range(n):
+            w[i] -= f * c[i]
+            diag[i] -= c[i] * c[i] / d
+            u[r, i] = c[i] * g
+        w[j] = 0.0
+        dropped[r] = j
+        r += 1
+        budget -= score
+    return dropped[:r].copy()
 
 
 @njit(cache=True, parallel=True)

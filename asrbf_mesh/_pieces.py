@@ -34,7 +34,7 @@ from ._frame import HeightField
 from ._learn import MIN_POINTS, auto_d_min, learn_polished
 from ._piece import Piece
 from ._piece_map import PieceMap
-from ._polish import drop_idle, extend_and_solve, polish_weights
+from ._polish import drop_idle, extend_and_solve, extend_normal, polish_weights, solve_and_drop
 from ._segment import Segmentation
 from ._validate import progress as progress_bar
 
@@ -42,7 +42,7 @@ __all__ = ["PiecesLearned", "learn_pieces", "parallel_pieces", "piece_seed", "re
            "small_piece"]
 
 #: Tail refinement: points whose error exceeds this multiple of E get neurons.
-TAIL_FACTOR = 0.8
+TAIL_FACTOR = 0.6
 #: Tail refinement: at most this many rounds of insertion and weight solving.
 TAIL_ROUNDS = 3
 #: Tail refinement: the threshold is at least this many robust noise scales of the piece.
@@ -52,7 +52,16 @@ TAIL_PRUNE = 0.3
 #: Tail refinement, last step: neurons whose removal (the other weights solved again)
 #: raises the sum of squared errors by less than this many E^2 are dropped
 #: (:func:`~asrbf_mesh._polish.drop_idle`).
-IDLE_RSS = 2.0
+IDLE_RSS = 12.0
+#: Tail refinement: the neurons dropped may together give back at most this share of
+#: what the tails gained in the sum of squared errors.
+IDLE_GIVE_BACK = 0.5
+#: Tail refinement: after the drop, points above this multiple of the threshold get neurons.
+REFILL_FACTOR = 1.5
+#: Tail refinement: a guard against a numerical breakdown: the result is kept unless its
+#: mean error exceeds the polished network's by more than this fraction (dropping may
+#: raise it: 0.72-1.25x on the pieces of the face map and the bunnies, seed 0).
+IDLE_TOLERANCE = 1.0
 #: Tail refinement: the data's slope at a point is a plane through this many samples.
 _SLOPE_NEIGHBOURS = 8
 #: Tail refinement: points sampled for the noise scale.
@@ -246,68 +255,107 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     learning) whose weight is solved by least squares over the points under it, the
     other neurons fixed (one global solve costs as much as the polish; these cost a
     fraction). Stops when no point is left above the threshold, after ``TAIL_ROUNDS`` or
-    at the neuron cap (``max_neurons``);
-    then all the weights are solved together once, from the weight polish's normal
+    at the neuron cap (``max_neurons``).
+
+    Then all the weights are solved together once, from the weight polish's normal
     equations (``polished``, its :class:`~asrbf_mesh._polish.PolishResult`) extended by
-    the new neurons' rows (:func:`~asrbf_mesh._polish.extend_and_solve`), or by a new
-    weight polish after the full one. Last, the neurons the network hardly needs are
-    dropped (:func:`~asrbf_mesh._polish.drop_idle` with ``IDLE_RSS`` x E^2): each
-    would raise the sum of squared errors by less than two points off by E.
+    the new neurons' rows (:func:`~asrbf_mesh._polish.extend_normal`), and the neurons
+    the network hardly needs are dropped one at a time, the cheapest first, while a
+    removal raises the sum of squared errors by less than ``IDLE_RSS`` x E^2 (eight
+    points off by E; :func:`~asrbf_mesh._polish.solve_and_drop`). The result is kept
+    unless its mean error exceeds the polished network's by more than
+    ``IDLE_TOLERANCE``. Without dense normal equations (after the full polish, or
+    above :data:`~asrbf_mesh._polish.IDLE_MAX_NEURONS` neurons) a weight polish solves
+    them and :func:`~asrbf_mesh._polish.drop_idle` drops.
     """
     from scipy.spatial import cKDTree
 
     scale = np.asarray(sub.frame.scale, dtype=np.float64)
-    points, limit = None, 0.0
-    added = 0
-    for _ in range(TAIL_ROUNDS):
-        if len(widths) == 0:
-            break
+    points, slope2, limit = None, None, 0.0
+
+    def one_round(a0, centers, widths, weights, factor=1.0):
+        """Neurons for the worst points: (centers, widths, weights, how many added)."""
+        nonlocal points, slope2, limit
         piece = Piece(a0, centers, widths, weights)
         res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
         if points is None:  # the first round: the piece's noise scale, once
             points = cKDTree(sub.xy)
+            slope2 = np.full(sub.n_points, np.nan)
             sample = np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE))
-            some = _across(piece, sub, res, sample, scale, cfg.support, points)
+            some = _across(piece, sub, res, sample, scale, cfg.support, points, slope2)
             mad = float(np.median(np.abs(some - np.median(some))))
             limit = max(TAIL_FACTOR * cfg.error_threshold, TAIL_NOISE * 1.4826 * mad)
-        worst = np.flatnonzero(np.abs(res) > limit)  # the error across is at most |res|
-        off = _across(piece, sub, res, worst, scale, cfg.support, points)
-        worst, off = worst[off > limit], off[off > limit]
+        above = factor * limit
+        worst = np.flatnonzero(np.abs(res) > above)  # the error across is at most |res|
+        off = _across(piece, sub, res, worst, scale, cfg.support, points, slope2)
+        worst, off = worst[off > above], off[off > above]
         worst = worst[np.argsort(-off, kind="stable")][:_TAIL_CANDIDATES]
         picked = worst[_spread(sub.xy[worst], d_min)]
         if cfg.max_neurons is not None:  # the neuron cap holds here too
             picked = picked[:max(cfg.max_neurons - len(widths), 0)]
         if len(picked) == 0:
-            break
+            return centers, widths, weights, 0
         new = sub.xy[picked]
         near = np.linalg.norm(new - centers[cKDTree(centers).query(new)[1]], axis=1)
         sigma = np.maximum(cfg.psi * near, 0.5 * d_min)
-        a_new = _local_weights(sub.xy, res, new, sigma, cfg, points)
-        centers, widths = np.vstack([centers, new]), np.r_[widths, sigma]
-        weights = np.r_[weights, a_new]
-        added += len(picked)
-    if added == 0:
-        pr = polished
-        if pr is None or pr.ata is None or pr.ata.shape[0] != len(widths) + 1:
+        a_new = _local_weights(sub.xy, res, new, sigma, cfg)
+        return (np.vstack([centers, new]), np.r_[widths, sigma], np.r_[weights, a_new],
+                len(picked))
+
+    added = 0
+    for _ in range(TAIL_ROUNDS):
+        if len(widths) == 0:
+            break
+        centers, widths, weights, n = one_round(a0, centers, widths, weights)
+        if n == 0:
+            break
+        added += n
+    idle = IDLE_RSS * cfg.error_threshold ** 2
+    ata = None if polished is None else polished.ata
+    if ata is not None and ata.shape[0] == len(widths) - added + 1:
+        # the polish's normal equations extended by the new neurons' columns, solved,
+        # and the neurons the network hardly needs dropped, from one dense inverse
+        if added:
+            ata, atz = extend_normal(sub.xy, sub.z, polished, centers, widths, weights,
+                                     cfg.support)
+        else:
+            atz = polished.atz
+        base = np.concatenate([[polished.a0], polished.weights, np.zeros(added)])
+        got = solve_and_drop(sub.xy, sub.z, ata, atz, a0, centers, widths, weights,
+                             cfg.support, cfg.polish_ridge, idle, base=base,
+                             give_back=IDLE_GIVE_BACK)
+        if got is not None:
+            pr, dropped = got
+            if added + dropped == 0 \
+                    or pr.ebar_after > polished.ebar_after * (1.0 + IDLE_TOLERANCE):
+                # nothing changed, or the tails did not pay: the polished network
+                return (polished.a0, polished.centers, polished.widths, polished.weights), 0
+            if dropped and len(pr.widths) and TAIL_ROUNDS:
+                # a last round for the points the dropped neurons left above the threshold
+                centers, widths, weights, n = one_round(pr.a0, pr.centers, pr.widths,
+                                                        pr.weights, REFILL_FACTOR)
+                return (pr.a0, centers, widths, weights), added + n
+            return (pr.a0, pr.centers, pr.widths, pr.weights), added
+        if added == 0:
             return (a0, centers, widths, weights), 0
-    elif polished is not None and polished.ata is not None \
-            and polished.ata.shape[0] == len(widths) - added + 1:
         pr = extend_and_solve(sub.xy, sub.z, polished, a0, centers, widths, weights,
-                              cfg.support, cfg.polish_ridge, points=points)
+                              cfg.support, cfg.polish_ridge)
+    elif added == 0:
+        return (a0, centers, widths, weights), 0
     else:
         pr = polish_weights(sub.xy, sub.z, a0, centers, widths, weights, cfg.support,
                             cfg.polish_ridge)
-    pr, _ = drop_idle(sub.xy, sub.z, pr, cfg.support, cfg.polish_ridge,
-                      IDLE_RSS * cfg.error_threshold ** 2)
+    pr, _ = drop_idle(sub.xy, sub.z, pr, cfg.support, cfg.polish_ridge, idle,
+                      tolerance=IDLE_TOLERANCE)
     return (pr.a0, pr.centers, pr.widths, pr.weights), added
 
 
 def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: np.ndarray,
-                   cfg: FitConfig, points) -> np.ndarray:
+                   cfg: FitConfig) -> np.ndarray:
     """Least-squares weights of new neurons for the residual under them (ridge as the polish)."""
     from ._polish import _normal_under, _ridged, _solve_spd, rows_under
 
-    rows = rows_under(points, centers, sigma, cfg.support)
+    rows = rows_under(xy, centers, sigma, cfg.support)
     if len(rows) == 0:
         return np.zeros(len(sigma))
     normal = _normal_under(xy, res, rows, centers, sigma, np.ones(len(sigma)), cfg.support,
@@ -318,27 +366,33 @@ def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: 
 
 
 def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
-            scale: np.ndarray, support: float, points) -> np.ndarray:
+            scale: np.ndarray, support: float, points, slope2: np.ndarray) -> np.ndarray:
     """Return the error across the surface at points ``at``, not along the view.
 
     A steep point whose depth is off by 5 E may lie within E of the surface: the depth
     error times the cosine of the slope, the slope taken in physical proportions. The
     slope is the smaller of the network's and the data's (a plane through the point's
     eight nearest samples, ``points`` their tree): a network that swings steeply where
-    the scan does not is off by its whole depth error.
+    the scan does not is off by its whole depth error. ``slope2`` holds the data's
+    squared slope per point, NaN where not yet measured (filled here: the data do not
+    change between rounds).
     """
     if len(at) == 0:
         return np.zeros(0)
     ratio = scale[2] / scale[:2]
     net = piece.eval_unit(sub.xy[at], support, True)[1] * ratio
-    k = min(_SLOPE_NEIGHBOURS, sub.n_points)
-    _, near = points.query(sub.xy[at], k=k)
-    near = near.reshape(len(at), k)
-    d = sub.xy[near] - sub.xy[near].mean(axis=1, keepdims=True)  # (M, k, 2)
-    dz = sub.z[near] - sub.z[near].mean(axis=1, keepdims=True)
-    gram = np.einsum("mki,mkj->mij", d, d) + 1e-12 * np.eye(2)
-    data = np.linalg.solve(gram, np.einsum("mki,mk->mi", d, dz)[..., None])[..., 0] * ratio
-    s2 = np.minimum(np.einsum("ij,ij->i", net, net), np.einsum("ij,ij->i", data, data))
+    new = at[np.isnan(slope2[at])]
+    if len(new):
+        k = min(_SLOPE_NEIGHBOURS, sub.n_points)
+        _, near = points.query(sub.xy[new], k=k)
+        near = near.reshape(len(new), k)
+        d = sub.xy[near] - sub.xy[near].mean(axis=1, keepdims=True)  # (M, k, 2)
+        dz = sub.z[near] - sub.z[near].mean(axis=1, keepdims=True)
+        gram = np.einsum("mki,mkj->mij", d, d) + 1e-12 * np.eye(2)
+        data = np.linalg.solve(gram, np.einsum("mki,mk->mi", d, dz)[..., None])[..., 0]
+        data *= ratio
+        slope2[new] = np.einsum("ij,ij->i", data, data)
+    s2 = np.minimum(np.einsum("ij,ij->i", net, net), slope2[at])
     return np.abs(res[at]) / np.sqrt(1.0 + s2)
 
 

@@ -20,17 +20,17 @@ import contextlib
 import functools
 import threading
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import cg, spsolve
 
 from . import _network_kernels as _nk
-from ._piece import eval_grid, eval_unit
+from ._piece import _read_only, eval_grid, eval_unit
 
 __all__ = ["PolishResult", "polish_weights", "polish_weights_blocks", "polish_full",
-           "design_matrix", "extend_and_solve"]
+           "design_matrix", "extend_and_solve", "extend_normal", "solve_and_drop", "drop_idle"]
 
 _SIGMA_RANGE = (1e-5, 2.0)
 _CENTRE_BOX = (-0.25, 1.25)
@@ -136,8 +136,12 @@ class _Normal:
         """``A'A``, symmetric: a dense array up to :data:`DENSE_MAX` unknowns, else CSR."""
         if self.dense is None:
             return self.sparse.tocsr()
-        if not self.mirrored:  # the kernel filled the upper triangle
-            self.dense += np.triu(self.dense, 1).T
+        if not self.mirrored:
+            f = self.first
+            if f:  # the kernel filled the rows >= first
+                self.dense[:f, f:] = self.dense[f:, :f].T
+            else:  # the kernel filled the upper triangle
+                self.dense += np.triu(self.dense, 1).T
             self.mirrored = True
         return self.dense
 
@@ -236,31 +240,22 @@ def polish_weights_blocks(blocks: Callable[[], Iterable[tuple[np.ndarray, np.nda
                         atz)
 
 
-def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
-                     centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
-                     support: float, ridge: float = 1e-4, *,
-                     points=None) -> PolishResult:
-    """Polish the weights again after neurons were appended to ``pr``'s, at a local cost.
+def extend_normal(xy: np.ndarray, z: np.ndarray, pr: PolishResult, centers: np.ndarray,
+                  widths: np.ndarray, weights: np.ndarray, support: float
+                  ) -> tuple[np.ndarray | sp.csr_matrix, np.ndarray]:
+    """``pr``'s normal equations ``(A'A, A'z)`` extended by neurons appended to its own.
 
-    ``centers``, ``widths`` and ``weights`` are ``pr``'s neurons followed by the new ones
-    (``a0`` and the weights as they stand now). ``pr``'s normal equations are extended
-    by the columns of the new neurons, computed over the points under them only (the
-    other rows are zero there), and the weights are solved as :func:`polish_weights`
-    does, pulled toward the current ones; the result is kept when it lowers the mean
-    absolute error. ``points`` is a :class:`scipy.spatial.cKDTree` of ``xy`` if one exists.
+    ``centers``, ``widths`` and ``weights`` are ``pr``'s neurons followed by the new
+    ones. The new columns are summed over the points under the new neurons only (the
+    other rows are zero there), so the cost is local.
     """
-    from scipy.spatial import cKDTree
-
     if pr.ata is None or pr.atz is None:
-        raise ValueError("extend_and_solve needs the normal equations of a weight polish")
+        raise ValueError("extending needs the normal equations of a weight polish")
     k_old = pr.ata.shape[0] - 1
     m = len(widths) - k_old
-    w0 = np.concatenate([[a0], weights])
-    before = float(np.abs(z - _predict(xy, a0, centers, widths, weights, support)).mean())
     if m <= 0:
-        return PolishResult(a0, centers, widths, weights, before, before, 0, pr.ata, pr.atz)
-    tree = cKDTree(xy) if points is None else points
-    rows = rows_under(tree, centers[k_old:], widths[k_old:], support)
+        return pr.ata, pr.atz
+    rows = rows_under(xy, centers[k_old:], widths[k_old:], support)
     normal = _normal_under(xy, z, rows, centers, widths, weights, support, 1 + k_old)
     ata = normal.matrix()
     if isinstance(ata, np.ndarray):
@@ -269,9 +264,27 @@ def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
         old = sp.csr_matrix(pr.ata)  # padded with the new (empty) rows and columns
         old = sp.csr_matrix((old.data, old.indices,
                              np.r_[old.indptr, np.full(m, old.indptr[-1])]),
-                            shape=(len(w0),) * 2)
+                            shape=(len(widths) + 1,) * 2)
         ata = (old + ata).tocsr()
-    atz = np.concatenate([pr.atz, normal.atr[1 + k_old:]])
+    return ata, np.concatenate([pr.atz, normal.atr[1 + k_old:]])
+
+
+def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
+                     centers: np.ndarray, widths: np.ndarray, weights: np.ndarray,
+                     support: float, ridge: float = 1e-4) -> PolishResult:
+    """Polish the weights again after neurons were appended to ``pr``'s, at a local cost.
+
+    ``centers``, ``widths`` and ``weights`` are ``pr``'s neurons followed by the new ones
+    (``a0`` and the weights as they stand now). ``pr``'s normal equations are extended
+    by the new neurons' columns (:func:`extend_normal`) and the weights are solved as
+    :func:`polish_weights` does, pulled toward the current ones; the result is kept
+    when it lowers the mean absolute error.
+    """
+    ata, atz = extend_normal(xy, z, pr, centers, widths, weights, support)
+    w0 = np.concatenate([[a0], weights])
+    before = float(np.abs(z - _predict(xy, a0, centers, widths, weights, support)).mean())
+    if len(widths) + 1 == pr.ata.shape[0]:  # nothing appended
+        return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
     w = w0 + _solve_spd(_ridged(ata, ridge), atz - ata @ w0)
     if not np.all(np.isfinite(w)):
         return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
@@ -297,18 +310,21 @@ def _dense(m: np.ndarray | sp.spmatrix) -> np.ndarray:
     return m if isinstance(m, np.ndarray) else m.toarray()
 
 
-def rows_under(points, centers: np.ndarray, widths: np.ndarray, support: float) -> np.ndarray:
-    """Sorted indices of the points within the truncated support of any of the neurons.
+def rows_under(xy: np.ndarray, centers: np.ndarray, widths: np.ndarray,
+               support: float) -> np.ndarray:
+    """Sorted indices of the (N, 2) unit-square points under any of the neurons.
 
-    ``points`` is a :class:`scipy.spatial.cKDTree` of the points (unit square).
+    Under: within the truncated support, by the test the design rows use
+    (:func:`~asrbf_mesh._network_kernels.under_any`), so these are exactly the rows
+    where the neurons' columns are not zero.
     """
-    n = points.n
     if len(widths) == 0:
         return np.zeros(0, np.int64)
-    under = np.zeros(n, dtype=bool)
-    near = points.query_ball_point(centers, support * widths, return_sorted=False)
-    under[np.concatenate([np.asarray(r, dtype=np.int64) for r in near])] = True
-    return np.flatnonzero(under)
+    support_, lo, h, g, start, items, _, _ = eval_grid(centers, widths, np.zeros(len(widths)),
+                                                       support)
+    return np.flatnonzero(_nk.under_any(np.ascontiguousarray(xy, dtype=np.float64),
+                                        _read_only(centers), _read_only(widths), support_,
+                                        lo, h, g, start, items))
 
 
 def _solve_spd(mat: sp.spmatrix | np.ndarray, rhs: np.ndarray) -> np.ndarray:
@@ -450,68 +466,85 @@ def _blas_controller():
     return ThreadpoolController()
 
 
-def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
-              ridge: float, limit: float, *, rounds: int = 2,
-              tolerance: float = 0.005) -> tuple[PolishResult, int]:
-    """Drop neurons the polished network hardly needs; (result, neurons dropped).
+def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
+                   atz: np.ndarray, a0: float, centers: np.ndarray, widths: np.ndarray,
+                   weights: np.ndarray, support: float, ridge: float, limit: float, *,
+                   base: np.ndarray | None = None, give_back: float = 1.0
+                   ) -> tuple[PolishResult, int] | None:
+    """Solve the weights from normal equations, then drop the neurons hardly needed.
 
-    Removing neuron ``j`` and solving the other weights again raises the sum of
-    squared errors by ``a_j^2 / (M^-1)_jj`` (``M``: the ridge-regularized normal
-    equations of ``pr``, kept by the polish), the classic backward-elimination test.
-    Each round drops the neurons whose rise is under ``limit`` (unit depth squared),
-    smallest first and no two sharing a point (so the rises add up), and solves the
-    remaining weights from ``pr``'s normal equations: no design matrix is built again.
-    The result is kept when the mean absolute error grows by at most ``tolerance``
-    (relative); ``pr`` is returned unchanged for a network without normal equations or
-    above :data:`IDLE_MAX_NEURONS` neurons (the test inverts ``M`` densely).
+    The weights minimize ``||A w - z||^2 + lam ||w - w_now||^2`` (``A'A = ata``,
+    ``A'z = atz``, ``w_now = (a0, weights)``, ``lam`` as :func:`polish_weights`). Then
+    removing neuron ``j`` and solving the other weights again raises that sum by
+    ``w_j^2 / (M^-1)_jj`` (``M = A'A + lam I``), the classic backward-elimination test:
+    the neurons go one at a time, the one whose removal costs least first, while that
+    cost is under ``limit`` (unit depth squared), each removal updating the other
+    weights and costs exactly (:func:`~asrbf_mesh._network_kernels.eliminate`: one
+    dense inverse of ``M``, then rank-one terms); no design matrix is built again.
+    With ``base`` (weights ``(a0, a_1 .. a_K)`` of a reference network, e.g. before
+    neurons were appended), the removals together raise the sum by at most
+    ``give_back`` times what the solved weights gained over ``base``: the result's sum
+    of squared errors stays below the reference's when ``give_back < 1``.
+    Returns ``(result, neurons dropped)``, the result's ``ebar_after`` measured (and its
+    ``ebar_before`` NaN), or None above :data:`IDLE_MAX_NEURONS` neurons or when ``M``
+    is not positive definite.
     """
     import scipy.linalg as sla
 
-    k = len(pr.widths)
-    if pr.ata is None or pr.atz is None or k < 2 or k > IDLE_MAX_NEURONS \
-            or pr.ata.shape[0] != k + 1:
-        return pr, 0
-    ata = _dense(pr.ata)
-    keep = np.arange(k)
-    w = np.concatenate([[pr.a0], pr.weights])
-    for _ in range(rounds):
-        cols = np.concatenate([[0], 1 + keep])
-        sub = _ridged(ata[np.ix_(cols, cols)], ridge)
-        # one BLAS thread: worker threads left spinning after a threaded factorization
-        # took the cores from the numba kernels that follow it (the piecewise fit of
-        # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without)
-        with _one_blas_thread():
-            chol, info = sla.lapack.dpotrf(sub, lower=1)
-            if info == 0:
-                inv, info = sla.lapack.dpotri(chol, lower=1)
-        if info != 0:
-            break
-        score = w[cols[1:]] ** 2 / np.diagonal(inv)[1:]
-        cand = np.flatnonzero(score < limit)
-        if len(cand) == 0:
-            break
-        near = sub[1:, 1:] != 0  # neurons sharing a point have a non-zero entry
-        blocked = np.zeros(len(keep), dtype=bool)
-        drop = []
-        for j in cand[np.argsort(score[cand], kind="stable")]:
-            if not blocked[j]:
-                drop.append(j)
-                blocked[near[j]] = True
-        keep = np.delete(keep, drop)
-        cols = np.concatenate([[0], 1 + keep])
-        sub = ata[np.ix_(cols, cols)]
-        w_sub = w[cols]
-        w_sub = w_sub + _solve_spd(_ridged(sub, ridge), pr.atz[cols] - sub @ w_sub)
-        if not np.all(np.isfinite(w_sub)):
-            return pr, 0
-        w = np.zeros_like(w)
-        w[cols] = w_sub
-    if len(keep) == k:
-        return pr, 0
+    from ._network_kernels import eliminate
+
+    k = len(widths)
+    if k > IDLE_MAX_NEURONS or ata.shape[0] != k + 1:
+        return None
+    ata = _dense(ata)
+    w = np.concatenate([[a0], weights])
+    # one BLAS thread: worker threads left spinning after a threaded factorization
+    # took the cores from the numba kernels that follow it (the piecewise fit of
+    # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without)
+    with _one_blas_thread():
+        chol, info = sla.lapack.dpotrf(_ridged(ata, ridge), lower=1)
+        if info == 0:
+            step, info = sla.lapack.dpotrs(chol, atz - ata @ w, lower=1)
+        if info == 0:
+            inv, info = sla.lapack.dpotri(chol, lower=1)  # its lower triangle
+    if info != 0:
+        return None
+    w = w + step
+    budget = np.inf
+    if base is not None:  # the gain in the sum of squares, from the normal equations
+        gain = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
+        budget = give_back * max(gain, 0.0)
+    dropped = eliminate(inv, w, float(limit), float(budget))
+    if not np.all(np.isfinite(w)):
+        return None
+    keep = np.setdiff1d(np.arange(k), dropped - 1)
     cols = np.concatenate([[0], 1 + keep])
-    centers, widths, weights = pr.centers[keep], pr.widths[keep], w[1 + keep]
+    centers, widths, weights = centers[keep], widths[keep], w[1 + keep]
     after = float(np.abs(z - _predict(xy, w[0], centers, widths, weights, support)).mean())
-    if after > pr.ebar_after * (1.0 + tolerance):
+    return PolishResult(float(w[0]), centers, widths, weights.copy(), float("nan"), after, 1,
+                        ata[np.ix_(cols, cols)], atz[cols]), len(dropped)
+
+
+def _sum_squares(ata: np.ndarray, atz: np.ndarray, w: np.ndarray) -> float:
+    """Return ``||A w - z||^2`` less the constant ``z'z``, from the normal equations."""
+    return float(w @ (ata @ w) - 2.0 * (w @ atz))
+
+
+def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
+              ridge: float, limit: float, *,
+              tolerance: float = 0.005) -> tuple[PolishResult, int]:
+    """Drop neurons the polished network hardly needs; (result, neurons dropped).
+
+    :func:`solve_and_drop` from ``pr``'s normal equations (kept by the weight polish).
+    The result is kept when the mean absolute error grows by at most ``tolerance``
+    (relative); ``pr`` is returned unchanged when no neuron goes, for a network without
+    normal equations, or above :data:`IDLE_MAX_NEURONS` neurons (the test inverts ``M``
+    densely).
+    """
+    if pr.ata is None or pr.atz is None or len(pr.widths) < 2:
         return pr, 0
-    return PolishResult(float(w[0]), centers, widths, weights.copy(), pr.ebar_before, after,
-                        pr.iterations, ata[np.ix_(cols, cols)], pr.atz[cols]), k - len(keep)
+    got = solve_and_drop(xy, z, pr.ata, pr.atz, pr.a0, pr.centers, pr.widths, pr.weights,
+                         support, ridge, limit)
+    if got is None or got[1] == 0 or got[0].ebar_after > pr.ebar_after * (1.0 + tolerance):
+        return pr, 0
+    return replace(got[0], ebar_before=pr.ebar_before, iterations=pr.iterations), got[1]

@@ -255,6 +255,83 @@ def test_extend_and_solve_equals_a_polish_of_all_neurons(learned, monkeypatch,
     np.testing.assert_allclose(got.weights, ref.weights, rtol=1e-6, atol=1e-8)
 
 
+def test_rows_under_are_the_rows_where_the_neurons_columns_are_not_zero(learned) -> None:
+    from asrbf_mesh._polish import rows_under
+
+    hf, st = learned
+    some = slice(3, 40, 4)
+    got = rows_under(hf.xy, st.centers[some], st.widths[some], 3.5)
+    A = design_matrix(hf.xy, st.centers, st.widths, st.weights, 3.5).tocsc()[:, 1:][:, some]
+    np.testing.assert_array_equal(got, np.flatnonzero(np.diff(A.tocsr().indptr) > 0))
+    assert len(rows_under(hf.xy, np.zeros((0, 2)), np.zeros(0), 3.5)) == 0
+
+
+def test_eliminate_is_greedy_backward_elimination_by_brute_force() -> None:
+    # each step removes the unknown whose removal raises the objective least, exactly
+    import scipy.linalg as sla
+
+    from asrbf_mesh._network_kernels import eliminate
+
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(200, 12))
+    A[:, 0] = 1.0
+    A[:, 5] = A[:, 4] + 1e-3 * rng.normal(size=200)  # a near twin
+    z = A[:, :4] @ rng.normal(size=4) + 0.01 * rng.normal(size=200)
+    M, b = A.T @ A + 1e-6 * np.eye(12), A.T @ z
+    inv = sla.lapack.dpotri(sla.lapack.dpotrf(M, lower=1)[0], lower=1)[0]
+    inv[np.triu_indices(12, 1)] = np.nan  # the upper triangle is not read
+
+    def solve(keep: list[int]) -> tuple[np.ndarray, float]:
+        w = np.zeros(12)
+        w[keep] = np.linalg.solve(M[np.ix_(keep, keep)], b[keep])
+        return w, w @ M @ w - 2.0 * b @ w
+
+    cur, order = list(range(12)), []
+    while True:
+        rises = [(solve([c for c in cur if c != j])[1] - solve(cur)[1], j) for j in cur[1:]]
+        rise, j = min(rises)
+        if rise >= 0.05:
+            break
+        order.append(j)
+        cur.remove(j)
+    w = np.linalg.solve(M, b)
+    dropped = eliminate(inv, w, 0.05, np.inf)
+    assert dropped.tolist() == order and 0 not in order and len(order) >= 3
+    np.testing.assert_allclose(w, solve(cur)[0], atol=1e-10)
+    # a budget stops the removals before their rises add up past it
+    first = solve([c for c in range(12) if c != order[0]])[1] - solve(list(range(12)))[1]
+    assert eliminate(inv, np.linalg.solve(M, b), 0.05, first * 1.01).tolist() == order[:1]
+
+
+def test_solve_and_drop_gives_back_at_most_its_share_of_the_gain(learned) -> None:
+    from asrbf_mesh._polish import extend_normal, solve_and_drop
+
+    hf, st = learned
+    k = len(st.widths) - 8
+    first = polish_weights(hf.xy, hf.z, st.a0, st.centers[:k], st.widths[:k],
+                           st.weights[:k], 3.5)
+    weights = np.r_[first.weights, st.weights[k:]]
+    ata, atz = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    base = np.r_[first.a0, first.weights, np.zeros(8)]
+
+    def sum_squares(pr) -> float:
+        A = design_matrix(hf.xy, pr.centers, pr.widths, pr.weights, 3.5)
+        return float(((A @ np.r_[pr.a0, pr.weights] - hf.z) ** 2).sum())
+
+    free, n_free = solve_and_drop(hf.xy, hf.z, ata, atz, first.a0, st.centers, st.widths,
+                                  weights, 3.5, 1e-4, np.inf)
+    assert n_free == len(st.widths)  # no limit, no budget: every neuron goes
+    full, none = solve_and_drop(hf.xy, hf.z, ata, atz, first.a0, st.centers, st.widths,
+                                weights, 3.5, 1e-4, 0.0)  # solved, nothing dropped
+    got, n = solve_and_drop(hf.xy, hf.z, ata, atz, first.a0, st.centers, st.widths,
+                            weights, 3.5, 1e-4, np.inf, base=base, give_back=0.5)
+    assert none == 0 and 0 < n < len(st.widths)
+    before, best, after = sum_squares(first), sum_squares(full), sum_squares(got)
+    assert best < after <= best + 0.5 * (before - best) * (1 + 1e-6)
+    assert got.ebar_after == pytest.approx(mean_abs(hf.xy, hf.z, got.a0, got.centers,
+                                                    got.widths, got.weights))
+
+
 def test_large_systems_are_solved_by_conjugate_gradients() -> None:
     # above _DIRECT_MAX unknowns: CG, same solution as the direct solve
     import scipy.sparse as sp
