@@ -55,7 +55,7 @@ TAIL_PRUNE = 0.3
 IDLE_RSS = 12.0
 #: Tail refinement: the neurons dropped may together give back at most this share of
 #: what the tails gained in the sum of squared errors.
-IDLE_GIVE_BACK = 0.5
+IDLE_GIVE_BACK = 0.25
 #: Tail refinement: after the drop, points above this multiple of the threshold get neurons.
 REFILL_FACTOR = 1.5
 #: Tail refinement: a guard against a numerical breakdown: the result is kept unless its
@@ -131,8 +131,21 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
 
     big_first = [int(i) for i in np.argsort(-sizes, kind="stable")]
     if int(learned.sum()) >= 2 and parallel_pieces():
+        import numba
+
+        threads = numba.get_num_threads()
+
+        def beside(i: int) -> tuple:
+            # the other pieces learn on one numba thread (the setting is per thread):
+            # their parallel kernels would take cores from the largest piece's
+            numba.set_num_threads(threads if i == big_first[0] else 1)
+            try:
+                return one(i)
+            finally:
+                numba.set_num_threads(threads)
+
         with ThreadPoolExecutor(max_workers=2) as pool:
-            results = list(pool.map(one, big_first))
+            results = list(pool.map(beside, big_first))
     else:
         results = [one(i) for i in big_first]
     for i, (idx, piece, res, seq, learned_piece, seconds) in zip(big_first, results, strict=True):
@@ -279,8 +292,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         piece = Piece(a0, centers, widths, weights)
         res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
         if points is None:  # the first round: the piece's noise scale, once
-            points = cKDTree(sub.xy)
-            slope2 = np.full(sub.n_points, np.nan)
+            points, slope2 = cKDTree(sub.xy), np.full(sub.n_points, np.nan)
             sample = np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE))
             some = _across(piece, sub, res, sample, scale, cfg.support, points, slope2)
             mad = float(np.median(np.abs(some - np.median(some))))
@@ -383,17 +395,21 @@ def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
     net = piece.eval_unit(sub.xy[at], support, True)[1] * ratio
     new = at[np.isnan(slope2[at])]
     if len(new):
-        k = min(_SLOPE_NEIGHBOURS, sub.n_points)
-        _, near = points.query(sub.xy[new], k=k)
-        near = near.reshape(len(new), k)
-        d = sub.xy[near] - sub.xy[near].mean(axis=1, keepdims=True)  # (M, k, 2)
-        dz = sub.z[near] - sub.z[near].mean(axis=1, keepdims=True)
-        gram = np.einsum("mki,mkj->mij", d, d) + 1e-12 * np.eye(2)
-        data = np.linalg.solve(gram, np.einsum("mki,mk->mi", d, dz)[..., None])[..., 0]
-        data *= ratio
-        slope2[new] = np.einsum("ij,ij->i", data, data)
+        slope2[new] = _data_slopes(sub, points, new, ratio)
     s2 = np.minimum(np.einsum("ij,ij->i", net, net), slope2[at])
     return np.abs(res[at]) / np.sqrt(1.0 + s2)
+
+
+def _data_slopes(sub: HeightField, points, at: np.ndarray, ratio: np.ndarray) -> np.ndarray:
+    """Squared slope of the data at points ``at``: a plane through their nearest samples."""
+    k = min(_SLOPE_NEIGHBOURS, sub.n_points)
+    _, near = points.query(sub.xy[at], k=k)
+    near = near.reshape(len(at), k)
+    d = sub.xy[near] - sub.xy[near].mean(axis=1, keepdims=True)  # (M, k, 2)
+    dz = sub.z[near] - sub.z[near].mean(axis=1, keepdims=True)
+    gram = np.einsum("mki,mkj->mij", d, d) + 1e-12 * np.eye(2)
+    data = np.linalg.solve(gram, np.einsum("mki,mk->mi", d, dz)[..., None])[..., 0] * ratio
+    return np.einsum("ij,ij->i", data, data)
 
 
 def _spread(xy: np.ndarray, radius: float) -> np.ndarray:
