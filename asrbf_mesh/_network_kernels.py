@@ -325,37 +325,67 @@ def under_any(pts, centers, widths, support, lo, h, g, start, items):
     return out
 
 
-@njit(cache=True, nogil=True)
-def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
-    """Add design rows' normal equations into dense ``ata`` and ``atr``.
+@njit(cache=True, inline="always")
+def _row_residual(indptr, cols, vals, z, w0, i):
+    """Design row i's span ``(a, b)`` in the CSR arrays and its residual ``z_i - A_i w0``."""
+    a = indptr[i]
+    b = indptr[i + 1]
+    r = z[i]
+    for p in range(a, b):
+        r -= vals[p] * w0[cols[p]]
+    return a, b, r
 
-    Rows in CSR form ``(indptr, cols, vals)`` (:func:`design_rows`, not full). With
-    ``first = 0`` adds ``A'A`` into the upper triangle of ``ata`` (entry
-    ``[min(p, q), max(p, q)]``); with ``first > 0`` only the rows ``p >= first`` of
-    ``A'A``, whole (the columns of appended neurons, by symmetry). Adds ``A'(z - A w0)``
-    into ``atr`` where a column is ``>= first``; returns the sum of ``|z - A w0|``.
-    Rows are added one after another in order, so blocks of rows give the same sums bit
-    for bit as the rows at once.
+
+@njit(cache=True, parallel=True, nogil=True)
+def gram_new_rows(indptr, cols, vals, z, w0, first, parts, atr_parts):
+    """Add the rows ``p >= first`` of design rows' ``A'A`` (whole) and ``A'(z - A w0)``.
+
+    The normal equations of neurons appended at columns ``first`` on, for the rows under
+    them. The rows are cut in two halves, each summed (in order) into its own
+    ``parts[h]`` (row ``p - first``) and ``atr_parts[h]`` on its own thread; the caller
+    adds the halves. The cut depends on the rows only, so the sums are the same bit for
+    bit on one thread or two. Returns the sum of ``|z - A w0|``.
     """
     m = indptr.shape[0] - 1
-    total = 0.0
-    for i in range(m):
-        a = indptr[i]
-        b = indptr[i + 1]
-        r = z[i]
-        for p in range(a, b):
-            r -= vals[p] * w0[cols[p]]
-        total += abs(r)
-        if first > 0:  # the whole rows p >= first of A'A, written along the row
+    half = m // 2
+    sums = np.zeros(2)
+    for h in prange(2):
+        lo = 0 if h == 0 else half
+        hi = half if h == 0 else m
+        part = parts[h]
+        ap = atr_parts[h]
+        total = 0.0
+        for i in range(lo, hi):
+            a, b, r = _row_residual(indptr, cols, vals, z, w0, i)
+            total += abs(r)
             for p in range(a, b):
                 cp = cols[p]
                 if cp < first:
                     continue
                 vp = vals[p]
-                atr[cp] += vp * r
+                ap[cp] += vp * r
+                row = cp - first
                 for q in range(a, b):
-                    ata[cp, cols[q]] += vp * vals[q]
-            continue
+                    part[row, cols[q]] += vp * vals[q]
+        sums[h] = total
+    return sums[0] + sums[1]
+
+
+@njit(cache=True, nogil=True)
+def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
+    """Add design rows' normal equations into dense ``ata`` (upper triangle) and ``atr``.
+
+    Rows in CSR form ``(indptr, cols, vals)`` (:func:`design_rows`, not full). Adds
+    ``A'A`` into the upper triangle of ``ata`` (entry ``[min(p, q), max(p, q)]``) and
+    ``A'(z - A w0)`` into ``atr``; returns the sum of ``|z - A w0|``. Rows are added one
+    after another in order, so blocks of rows give the same sums bit for bit as the rows
+    at once.
+    """
+    m = indptr.shape[0] - 1
+    total = 0.0
+    for i in range(m):
+        a, b, r = _row_residual(indptr, cols, vals, z, w0, i)
+        total += abs(r)
         for p in range(a, b):
             cp = cols[p]
             vp = vals[p]

@@ -44,7 +44,7 @@ __all__ = ["PiecesLearned", "learn_pieces", "parallel_pieces", "piece_seed", "re
 #: Tail refinement: points whose error exceeds this multiple of E get neurons.
 TAIL_FACTOR = 0.6
 #: Tail refinement: at most this many rounds of insertion and weight solving.
-TAIL_ROUNDS = 3
+TAIL_ROUNDS = 2
 #: Tail refinement: the threshold is at least this many robust noise scales of the piece.
 TAIL_NOISE = 3.0
 #: Tail refinement: neurons whose polished |weight| is under this multiple of E are dropped.

@@ -110,14 +110,21 @@ class _Normal:
         self.mirrored = False
         self.atr = np.zeros(k1)
         self.abs_sum = 0.0
+        # appended columns: their rows of A'A, summed in two halves (two threads)
+        self.parts = (np.zeros((2, k1 - first, k1)), np.zeros((2, k1))) \
+            if first and self.dense is not None else None
 
     def add(self, rows: tuple, z: np.ndarray) -> None:
         indptr, cols, vals = rows
         z = np.ascontiguousarray(z, np.float64)
         if self.dense is not None:
             assert not self.mirrored, "rows added after matrix()"
-            self.abs_sum += _nk.gram_rows(indptr, cols, vals, z, self.w0, self.first,
-                                          self.dense, self.atr)
+            if self.parts is not None:
+                self.abs_sum += _nk.gram_new_rows(indptr, cols, vals, z, self.w0, self.first,
+                                                  *self.parts)
+            else:
+                self.abs_sum += _nk.gram_rows(indptr, cols, vals, z, self.w0, self.first,
+                                              self.dense, self.atr)
             return
         A = sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, self.k1))
         r = z - A @ self.w0
@@ -133,12 +140,18 @@ class _Normal:
         self.atr += atr
 
     def matrix(self) -> np.ndarray | sp.csr_matrix:
-        """``A'A``, symmetric: a dense array up to :data:`DENSE_MAX` unknowns, else CSR."""
+        """``A'A``, symmetric: a dense array up to :data:`DENSE_MAX` unknowns, else CSR.
+
+        Call it before reading ``atr``: it also adds the halves of the appended columns.
+        """
         if self.dense is None:
             return self.sparse.tocsr()
         if not self.mirrored:
             f = self.first
-            if f:  # the kernel filled the rows >= first
+            if f:  # the kernel filled the rows >= first, in two halves
+                rows, atr = self.parts
+                self.dense[f:] = rows[0] + rows[1]
+                self.atr += atr[0] + atr[1]
                 self.dense[:f, f:] = self.dense[f:, :f].T
             else:  # the kernel filled the upper triangle
                 self.dense += np.triu(self.dense, 1).T

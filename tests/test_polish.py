@@ -266,6 +266,32 @@ def test_rows_under_are_the_rows_where_the_neurons_columns_are_not_zero(learned)
     assert len(rows_under(hf.xy, np.zeros((0, 2)), np.zeros(0), 3.5)) == 0
 
 
+def _appended(learned, m: int) -> tuple:
+    """A learned network's last ``m`` neurons appended to a polish of the others."""
+    hf, st = learned
+    k = len(st.widths) - m
+    first = polish_weights(hf.xy, hf.z, st.a0, st.centers[:k], st.widths[:k],
+                           st.weights[:k], 3.5)
+    return hf, st, first, np.r_[first.weights, st.weights[k:]]
+
+
+def test_appended_columns_sum_to_the_same_bits_on_one_thread_or_two(learned) -> None:
+    import numba
+
+    from asrbf_mesh._polish import extend_normal
+
+    hf, st, first, weights = _appended(learned, 6)
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    finally:
+        numba.set_num_threads(threads)
+    two = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    assert one[0].tobytes() == two[0].tobytes() and one[1].tobytes() == two[1].tobytes()
+    np.testing.assert_array_equal(one[0], one[0].T)  # symmetric
+
+
 def test_eliminate_is_greedy_backward_elimination_by_brute_force() -> None:
     # each step removes the unknown whose removal raises the objective least, exactly
     import scipy.linalg as sla
@@ -306,11 +332,7 @@ def test_eliminate_is_greedy_backward_elimination_by_brute_force() -> None:
 def test_solve_and_drop_gives_back_at_most_its_share_of_the_gain(learned) -> None:
     from asrbf_mesh._polish import extend_normal, solve_and_drop
 
-    hf, st = learned
-    k = len(st.widths) - 8
-    first = polish_weights(hf.xy, hf.z, st.a0, st.centers[:k], st.widths[:k],
-                           st.weights[:k], 3.5)
-    weights = np.r_[first.weights, st.weights[k:]]
+    hf, st, first, weights = _appended(learned, 8)
     ata, atz = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
     base = np.r_[first.a0, first.weights, np.zeros(8)]
 
