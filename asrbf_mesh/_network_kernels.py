@@ -372,14 +372,14 @@ def gram_new_rows(indptr, cols, vals, z, w0, first, parts, atr_parts):
 
 
 @njit(cache=True, nogil=True)
-def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
+def gram_rows(indptr, cols, vals, z, w0, ata, atr):
     """Add design rows' normal equations into dense ``ata`` (upper triangle) and ``atr``.
 
-    Rows in CSR form ``(indptr, cols, vals)`` (:func:`design_rows`, not full). Adds
-    ``A'A`` into the upper triangle of ``ata`` (entry ``[min(p, q), max(p, q)]``) and
-    ``A'(z - A w0)`` into ``atr``; returns the sum of ``|z - A w0|``. Rows are added one
-    after another in order, so blocks of rows give the same sums bit for bit as the rows
-    at once.
+    All columns (:func:`gram_new_rows` sums those of appended neurons). Rows in CSR
+    form ``(indptr, cols, vals)`` (:func:`design_rows`, not full). Adds ``A'A`` into the
+    upper triangle of ``ata`` (entry ``[min(p, q), max(p, q)]``) and ``A'(z - A w0)``
+    into ``atr``; returns the sum of ``|z - A w0|``. Rows are added one after another in
+    order, so blocks of rows give the same sums bit for bit as the rows at once.
     """
     m = indptr.shape[0] - 1
     total = 0.0
@@ -389,15 +389,13 @@ def gram_rows(indptr, cols, vals, z, w0, first, ata, atr):
         for p in range(a, b):
             cp = cols[p]
             vp = vals[p]
-            if cp >= first:
-                atr[cp] += vp * r
+            atr[cp] += vp * r
             for q in range(p, b):
                 cq = cols[q]
-                if cp >= first or cq >= first:
-                    if cp <= cq:
-                        ata[cp, cq] += vp * vals[q]
-                    else:
-                        ata[cq, cp] += vp * vals[q]
+                if cp <= cq:
+                    ata[cp, cq] += vp * vals[q]
+                else:
+                    ata[cq, cp] += vp * vals[q]
     return total
 
 

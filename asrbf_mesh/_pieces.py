@@ -54,9 +54,9 @@ TAIL_ROUNDS = 2
 TAIL_NOISE = 3.0
 #: Tail refinement: neurons whose polished |weight| is under this multiple of E are dropped.
 TAIL_PRUNE = 0.3
-#: Tail refinement, last step: neurons whose removal (the other weights solved again)
-#: raises the sum of squared errors by less than this many E^2 are dropped
-#: (:func:`~asrbf_mesh._polish.drop_idle`).
+#: Tail refinement, after the rounds: neurons whose removal (the other weights solved
+#: again) raises the sum of squared errors by less than this many E^2 are dropped
+#: (:func:`~asrbf_mesh._polish.solve_and_drop`).
 IDLE_RSS = 12.0
 #: Tail refinement: the neurons dropped may together give back at most this share of
 #: what the tails gained in the sum of squared errors.
@@ -280,10 +280,13 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     equations (``polished``, its :class:`~asrbf_mesh._polish.PolishResult`) extended by
     the new neurons' rows (:func:`~asrbf_mesh._polish.extend_normal`), and the neurons
     the network hardly needs are dropped one at a time, the cheapest first, while a
-    removal raises the sum of squared errors by less than ``IDLE_RSS`` x E^2 (eight
-    points off by E; :func:`~asrbf_mesh._polish.solve_and_drop`). The result is kept
-    unless its mean error exceeds the polished network's by more than
-    ``IDLE_TOLERANCE``. Without dense normal equations (after the full polish, or
+    removal raises the sum of squared errors by less than ``IDLE_RSS`` x E^2 (twelve
+    points off by E) and the removals together give back at most ``IDLE_GIVE_BACK`` of
+    what the new neurons gained (:func:`~asrbf_mesh._polish.solve_and_drop`). When
+    neurons were dropped, one last round (its weights local) takes the points left
+    above ``REFILL_FACTOR`` x the threshold. The result is kept unless its mean error
+    exceeds the polished network's by more than ``IDLE_TOLERANCE``. Without dense
+    normal equations (after the full polish, or
     above :data:`~asrbf_mesh._polish.IDLE_MAX_NEURONS` neurons) a weight polish solves
     them and :func:`~asrbf_mesh._polish.drop_idle` drops.
     """

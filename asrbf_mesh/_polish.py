@@ -123,8 +123,8 @@ class _Normal:
                 self.abs_sum += _nk.gram_new_rows(indptr, cols, vals, z, self.w0, self.first,
                                                   *self.parts)
             else:
-                self.abs_sum += _nk.gram_rows(indptr, cols, vals, z, self.w0, self.first,
-                                              self.dense, self.atr)
+                self.abs_sum += _nk.gram_rows(indptr, cols, vals, z, self.w0, self.dense,
+                                              self.atr)
             return
         A = sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, self.k1))
         r = z - A @ self.w0
