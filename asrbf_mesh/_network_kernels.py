@@ -371,6 +371,61 @@ def gram_new_rows(indptr, cols, vals, z, w0, first, parts, atr_parts):
     return sums[0] + sums[1]
 
 
+@njit(cache=True, parallel=True, nogil=True)
+def gram_new_under(pts, z, rows, centers, widths, support, lo, h, g, start, items, first,
+                   parts, atr_parts):
+    """:func:`gram_new_rows` of points ``rows`` straight from the neurons, ``w0 = 0``.
+
+    Each point's design row (the bias, then its cell's neurons in the cell's order: the
+    entries of :func:`design_rows`, to the last bit) is made in a small buffer and summed
+    at once, so no design matrix is stored: rows under appended neurons often cover
+    most of a piece, and a stored design matrix of them takes tens of megabytes. The
+    rows are cut in two fixed halves, each summed in order on its own thread (the same
+    sums on one thread or two). Returns the sum of ``|z|`` over the rows.
+    """
+    m = rows.shape[0]
+    half = m // 2
+    supp2 = support * support
+    longest = 0
+    for c in range(start.shape[0] - 1):
+        longest = max(longest, start[c + 1] - start[c])
+    sums = np.zeros(2)
+    for hh in prange(2):
+        r0 = 0 if hh == 0 else half
+        r1 = half if hh == 0 else m
+        cols = np.empty(longest + 1, np.int64)
+        vals = np.empty(longest + 1)
+        part = parts[hh]
+        ap = atr_parts[hh]
+        total = 0.0
+        for t in range(r0, r1):
+            i = rows[t]
+            x, y, c = _locate(pts, i, lo, h, g)
+            cols[0] = 0
+            vals[0] = 1.0
+            n = 1
+            for p in range(start[c], start[c + 1]):
+                j = items[p]
+                _, _, d2, s2 = _offset(x, y, centers, widths, j)
+                if d2 < supp2 * s2:  # the test and value of design_rows
+                    cols[n] = j + 1
+                    vals[n] = np.exp(-d2 / s2)
+                    n += 1
+            r = z[i]
+            total += abs(r)
+            for p in range(n):
+                cp = cols[p]
+                if cp < first:
+                    continue
+                vp = vals[p]
+                ap[cp] += vp * r
+                row = cp - first
+                for q in range(n):
+                    part[row, cols[q]] += vp * vals[q]
+        sums[hh] = total
+    return sums[0] + sums[1]
+
+
 @njit(cache=True, nogil=True)
 def gram_rows(indptr, cols, vals, z, w0, ata, atr):
     """Add design rows' normal equations into dense ``ata`` (upper triangle) and ``atr``.

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._frame import bounds
 from ._validate import readonly
 from .errors import ConfigError
 
@@ -101,8 +102,8 @@ class PieceMap:
         """
         from scipy import ndimage
 
-        lo = np.minimum(uv.min(axis=0), 0.0)
-        hi = np.maximum(uv.max(axis=0), 1.0)
+        lo, hi = bounds(uv)
+        lo, hi = np.minimum(lo, 0.0), np.maximum(hi, 1.0)
         cell = max(float(spacing), float(np.sqrt(np.prod(hi - lo) / MAX_MAP_CELLS)))
         lo = lo - 2 * cell
         nx, ny = (np.ceil((hi - lo) / cell).astype(np.int64) + 2)

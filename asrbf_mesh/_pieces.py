@@ -29,7 +29,7 @@ network's on all five scans (face map: 696 neurons and E-bar 0.00191 against 781
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -41,6 +41,7 @@ from ._piece import Piece
 from ._piece_map import PieceMap
 from ._polish import drop_idle, extend_and_solve, extend_normal, polish_weights, solve_and_drop
 from ._segment import Segmentation
+from ._tail_kernels import point_grid, spread
 from ._validate import progress as progress_bar
 
 __all__ = ["PiecesLearned", "learn_pieces", "parallel_pieces", "piece_seed", "refine_tails",
@@ -293,25 +294,29 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     from scipy.spatial import cKDTree
 
     scale = np.asarray(sub.frame.scale, dtype=np.float64)
-    points, slope2, limit = None, None, 0.0
+    grid, slope2, limit = None, None, 0.0
+    # the normal equations of the neurons so far, while they are the polish's extended
+    # (dense); the new neurons' weights come from them (:func:`_appended_weights`)
+    normal = polished if polished is not None and isinstance(polished.ata, np.ndarray) \
+        and polished.ata.shape[0] == len(widths) + 1 else None
 
     def one_round(a0, centers, widths, weights, factor=1.0):
         """Neurons for the worst points: (centers, widths, weights, how many added)."""
-        nonlocal points, slope2, limit
+        nonlocal grid, slope2, limit, normal
         piece = Piece(a0, centers, widths, weights)
         res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
-        if points is None:  # the first round: the piece's noise scale, once
-            points, slope2 = cKDTree(sub.xy), np.full(sub.n_points, np.nan)
+        if grid is None:  # the first round: the piece's noise scale, once
+            grid, slope2 = point_grid(sub.xy), np.full(sub.n_points, np.nan)
             sample = np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE))
-            some = _across(piece, sub, res, sample, scale, cfg.support, points, slope2)
+            some = _across(piece, sub, res, sample, scale, cfg.support, grid, slope2)
             mad = float(np.median(np.abs(some - np.median(some))))
             limit = max(TAIL_FACTOR * cfg.error_threshold, TAIL_NOISE * 1.4826 * mad)
         above = factor * limit
         worst = np.flatnonzero(np.abs(res) > above)  # the error across is at most |res|
-        off = _across(piece, sub, res, worst, scale, cfg.support, points, slope2)
+        off = _across(piece, sub, res, worst, scale, cfg.support, grid, slope2)
         worst, off = worst[off > above], off[off > above]
         worst = worst[np.argsort(-off, kind="stable")][:_TAIL_CANDIDATES]
-        picked = worst[_spread(sub.xy[worst], d_min)]
+        picked = worst[spread(sub.xy[worst], d_min)]
         if cfg.max_neurons is not None:  # the neuron cap holds here too
             picked = picked[:max(cfg.max_neurons - len(widths), 0)]
         if len(picked) == 0:
@@ -319,9 +324,17 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         new = sub.xy[picked]
         near = np.linalg.norm(new - centers[cKDTree(centers).query(new)[1]], axis=1)
         sigma = np.maximum(cfg.psi * near, 0.5 * d_min)
-        a_new = _local_weights(sub.xy, res, new, sigma, cfg)
-        return (np.vstack([centers, new]), np.r_[widths, sigma], np.r_[weights, a_new],
-                len(picked))
+        grown_c, grown_w = np.vstack([centers, new]), np.r_[widths, sigma]
+        if normal is not None and factor == 1.0:
+            # the new columns of the normal equations, over the rows under the new
+            # neurons: the last solve needs them, and they hold the local solve's
+            ata, atz = extend_normal(sub.xy, sub.z, normal, grown_c, grown_w,
+                                     np.r_[weights, np.zeros(len(sigma))], cfg.support)
+            normal = replace(normal, ata=ata, atz=atz)
+            a_new = _appended_weights(ata, atz, a0, weights, cfg.polish_ridge)
+        else:
+            a_new = _local_weights(sub.xy, res, new, sigma, cfg)
+        return grown_c, grown_w, np.r_[weights, a_new], len(picked)
 
     added = 0
     for _ in range(TAIL_ROUNDS):
@@ -332,18 +345,12 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             break
         added += n
     idle = IDLE_RSS * cfg.error_threshold ** 2
-    ata = None if polished is None else polished.ata
-    if ata is not None and ata.shape[0] == len(widths) - added + 1:
+    if normal is not None:
         # the polish's normal equations extended by the new neurons' columns, solved,
         # and the neurons the network hardly needs dropped, from one dense inverse
-        if added:
-            ata, atz = extend_normal(sub.xy, sub.z, polished, centers, widths, weights,
-                                     cfg.support)
-        else:
-            atz = polished.atz
         base = np.concatenate([[polished.a0], polished.weights, np.zeros(added)])
-        got = solve_and_drop(sub.xy, sub.z, ata, atz, a0, centers, widths, weights,
-                             cfg.support, cfg.polish_ridge, idle, base=base,
+        got = solve_and_drop(sub.xy, sub.z, normal.ata, normal.atz, a0, centers, widths,
+                             weights, cfg.support, cfg.polish_ridge, idle, base=base,
                              give_back=IDLE_GIVE_BACK)
         if got is not None:
             pr, dropped = got
@@ -363,12 +370,33 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
                               cfg.support, cfg.polish_ridge)
     elif added == 0:
         return (a0, centers, widths, weights), 0
+    elif polished is not None and polished.ata is not None \
+            and polished.ata.shape[0] == len(widths) - added + 1:
+        pr = extend_and_solve(sub.xy, sub.z, polished, a0, centers, widths, weights,
+                              cfg.support, cfg.polish_ridge)
     else:
         pr = polish_weights(sub.xy, sub.z, a0, centers, widths, weights, cfg.support,
                             cfg.polish_ridge)
     pr, _ = drop_idle(sub.xy, sub.z, pr, cfg.support, cfg.polish_ridge, idle,
                       tolerance=IDLE_TOLERANCE)
     return (pr.a0, pr.centers, pr.widths, pr.weights), added
+
+
+def _appended_weights(ata: np.ndarray, atz: np.ndarray, a0: float, weights: np.ndarray,
+                      ridge: float) -> np.ndarray:
+    """Least-squares weights of the neurons appended after ``weights``, the others fixed.
+
+    From the extended normal equations (columns ``[a0, weights, appended]``): the
+    appended block ``B = A_n'A_n`` and ``A_n'r = A_n'z - A_n'A_o (a0, weights)``, ``r``
+    the residual under the old neurons; ridged as the polish. The same solution as
+    :func:`_local_weights` on that residual, without a pass over the points.
+    """
+    from ._polish import _ridged, _solve_spd
+
+    k = len(weights) + 1
+    rhs = atz[k:] - ata[k:, :k] @ np.concatenate([[a0], weights])
+    a = _solve_spd(_ridged(ata[k:, k:], ridge), rhs)
+    return np.where(np.isfinite(a), a, 0.0)
 
 
 def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: np.ndarray,
@@ -387,13 +415,13 @@ def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: 
 
 
 def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
-            scale: np.ndarray, support: float, points, slope2: np.ndarray) -> np.ndarray:
+            scale: np.ndarray, support: float, grid: tuple, slope2: np.ndarray) -> np.ndarray:
     """Return the error across the surface at points ``at``, not along the view.
 
     A steep point whose depth is off by 5 E may lie within E of the surface: the depth
     error times the cosine of the slope, the slope taken in physical proportions. The
     slope is the smaller of the network's and the data's (a plane through the point's
-    eight nearest samples, ``points`` their tree): a network that swings steeply where
+    eight nearest samples, ``grid`` the piece's points binned): a network that swings steeply where
     the scan does not is off by its whole depth error. ``slope2`` holds the data's
     squared slope per point, NaN where not yet measured (filled here: the data do not
     change between rounds).
@@ -404,33 +432,18 @@ def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
     net = piece.eval_unit(sub.xy[at], support, True)[1] * ratio
     new = at[np.isnan(slope2[at])]
     if len(new):
-        slope2[new] = _data_slopes(sub, points, new, ratio)
+        slope2[new] = _data_slopes(sub, grid, new, ratio)
     s2 = np.minimum(np.einsum("ij,ij->i", net, net), slope2[at])
     return np.abs(res[at]) / np.sqrt(1.0 + s2)
 
 
-def _data_slopes(sub: HeightField, points, at: np.ndarray, ratio: np.ndarray) -> np.ndarray:
-    """Squared slope of the data at points ``at``: a plane through their nearest samples."""
+def _data_slopes(sub: HeightField, grid: tuple, at: np.ndarray, ratio: np.ndarray) -> np.ndarray:
+    """Squared slope of the data at points ``at``: a plane through their nearest samples.
+
+    ``grid`` is :func:`~asrbf_mesh._tail_kernels.point_grid` of the piece's points.
+    """
+    from ._tail_kernels import plane_slopes
+
     k = min(_SLOPE_NEIGHBOURS, sub.n_points)
-    _, near = points.query(sub.xy[at], k=k)
-    near = near.reshape(len(at), k)
-    d = sub.xy[near] - sub.xy[near].mean(axis=1, keepdims=True)  # (M, k, 2)
-    dz = sub.z[near] - sub.z[near].mean(axis=1, keepdims=True)
-    gram = np.einsum("mki,mkj->mij", d, d) + 1e-12 * np.eye(2)
-    data = np.linalg.solve(gram, np.einsum("mki,mk->mi", d, dz)[..., None])[..., 0] * ratio
-    return np.einsum("ij,ij->i", data, data)
-
-
-def _spread(xy: np.ndarray, radius: float) -> np.ndarray:
-    """Return a greedy subset of ``xy`` (indices, in its order), no two within ``radius``."""
-    from scipy.spatial import cKDTree
-
-    if len(xy) == 0:
-        return np.zeros(0, dtype=np.int64)
-    blocked = np.zeros(len(xy), dtype=bool)
-    out = []
-    for i, near in enumerate(cKDTree(xy).query_ball_point(xy, radius)):
-        if not blocked[i]:  # at most _TAIL_CANDIDATES points: a short loop
-            out.append(i)
-            blocked[near] = True
-    return np.asarray(out, dtype=np.int64)
+    return plane_slopes(sub.xy, sub.z, np.ascontiguousarray(at, np.int64), k,
+                        float(ratio[0]), float(ratio[1]), *grid)

@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
+from ._frame import bounds
 
 #: The bucket grid has at most this many cells per point (wider cells beyond).
 _CELLS_PER_POINT = 4
@@ -31,8 +32,8 @@ def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> n
         raise ValueError("jump_pairs: points must be a finite (N, 3) array")
     if not (radius > 0 and np.isfinite(radius)) or len(pts) < 2:
         return np.zeros((0, 2), dtype=np.int64)
-    lo = pts[:, :2].min(axis=0)
-    span = pts[:, :2].max(axis=0) - lo
+    lo, hi = bounds(pts[:, :2])
+    span = hi - lo
     # cells at least radius wide, and no more than a few per point (a far stray point
     # would otherwise ask for a grid of billions of cells)
     cell = max(radius, float(np.sqrt(span[0] * span[1] / (_CELLS_PER_POINT * len(pts)))),

@@ -292,6 +292,33 @@ def test_appended_columns_sum_to_the_same_bits_on_one_thread_or_two(learned) -> 
     np.testing.assert_array_equal(one[0], one[0].T)  # symmetric
 
 
+def test_appended_columns_equal_the_dense_design_matrix_products(learned) -> None:
+    # the fused kernel's A'A rows and A'z of the appended columns, against A'A by hand
+    from asrbf_mesh._polish import extend_normal
+
+    hf, st, first, weights = _appended(learned, 6)
+    ata, atz = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    A = dense_design(hf.xy, st.centers, st.widths, weights, 3.5, False)
+    np.testing.assert_allclose(ata, A.T @ A, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(atz, A.T @ hf.z, rtol=1e-12, atol=1e-9)
+
+
+def test_appended_weights_are_the_local_least_squares_weights(learned) -> None:
+    # the tails' new weights from the extended normal equations = a solve on the residual
+    from asrbf_mesh._pieces import _appended_weights, _local_weights
+    from asrbf_mesh._polish import extend_normal
+
+    hf, st, first, weights = _appended(learned, 6)
+    ata, atz = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    res = hf.z - first.a0 - dense_design(hf.xy, first.centers, first.widths, first.weights,
+                                         3.5, False)[:, 1:] @ first.weights
+    cfg = FitConfig()
+    got = _appended_weights(ata, atz, first.a0, first.weights, cfg.polish_ridge)
+    ref = _local_weights(hf.xy, res, st.centers[-6:], st.widths[-6:], cfg)
+    np.testing.assert_allclose(got, ref, rtol=1e-8, atol=1e-10)
+    assert np.abs(got).max() > 1e-3
+
+
 def test_eliminate_is_greedy_backward_elimination_by_brute_force() -> None:
     # each step removes the unknown whose removal raises the objective least, exactly
     import scipy.linalg as sla

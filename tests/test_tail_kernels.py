@@ -1,0 +1,72 @@
+"""Compiled spatial queries of the tail refinement: k nearest samples and greedy spread."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from asrbf_mesh._tail_kernels import _nearest, plane_slopes, point_grid, spread
+
+
+def _clouds() -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(0)
+    return {
+        "uniform": rng.random((600, 2)),
+        "on a line": np.c_[rng.random(300), np.zeros(300)],
+        "copies": np.repeat(rng.random((60, 2)), 4, axis=0),
+        "cluster and strays": np.r_[rng.random((400, 2)) * 0.01, [[5.0, 5.0], [5.0, 4.0]]],
+        "grid": np.stack(np.meshgrid(np.arange(25.0), np.arange(20.0)), -1).reshape(-1, 2),
+        "few": rng.random((5, 2)),
+    }
+
+
+@pytest.mark.parametrize("name", list(_clouds()))
+def test_the_grid_finds_the_k_nearest_points(name: str) -> None:
+    xy = _clouds()[name]
+    grid = point_grid(xy)
+    k = min(8, len(xy))
+    best_d, best_i = np.empty(k), np.empty(k, np.int64)
+    for q in range(len(xy)):
+        held = _nearest.py_func(xy, q, k, *grid, best_d, best_i)
+        truth = np.sort(((xy - xy[q]) ** 2).sum(axis=1))[:k]
+        assert held == k
+        np.testing.assert_allclose(best_d, truth, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(((xy[best_i] - xy[q]) ** 2).sum(axis=1), best_d, atol=1e-15)
+
+
+@pytest.mark.parametrize("name", ["uniform", "cluster and strays", "grid"])
+def test_plane_slopes_are_least_squares_planes_through_the_nearest_samples(name) -> None:
+    xy = _clouds()[name]
+    rng = np.random.default_rng(1)
+    z = 0.3 * xy[:, 0] - 0.7 * xy[:, 1] + 0.01 * rng.normal(size=len(xy))
+    at = np.arange(0, len(xy), 3)
+    got = plane_slopes(xy, z, at, 8, 2.0, 0.5, *point_grid(xy))
+    _, near = cKDTree(xy).query(xy[at], k=8)
+    ref = []
+    for m, nb in enumerate(near):
+        if name == "grid":  # ties among equal distances: the grid's own neighbours
+            d, i = np.empty(8), np.empty(8, np.int64)
+            _nearest.py_func(xy, at[m], 8, *point_grid(xy), d, i)
+            nb = i
+        d, dz = xy[nb] - xy[nb].mean(axis=0), z[nb] - z[nb].mean()
+        s = np.linalg.solve(d.T @ d + 1e-12 * np.eye(2), d.T @ dz) * [2.0, 0.5]  # ridged
+        ref.append(s @ s)
+    np.testing.assert_allclose(got, ref, rtol=1e-7, atol=1e-12)
+
+
+def test_a_flat_or_degenerate_neighbourhood_has_no_slope() -> None:
+    xy = np.repeat([[0.5, 0.5]], 10, axis=0)
+    got = plane_slopes(xy, np.zeros(10), np.arange(10), 8, 1.0, 1.0, *point_grid(xy))
+    assert np.all(np.isfinite(got)) and np.all(got == 0.0)
+
+
+@pytest.mark.parametrize("radius", [0.0, 0.03, 0.1, 0.5, 5.0])
+def test_spread_is_the_greedy_subset_in_order(radius: float) -> None:
+    xy = _clouds()["uniform"]
+    kept: list[int] = []
+    for i in range(len(xy)):  # the rule, by brute force
+        if all(np.hypot(*(xy[i] - xy[j])) > radius for j in kept):
+            kept.append(i)
+    assert spread(xy, radius).tolist() == kept
+    assert spread(np.zeros((0, 2)), radius).tolist() == []
