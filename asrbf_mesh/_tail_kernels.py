@@ -60,7 +60,7 @@ def _bin(xy, lo, h, gx, gy):
 
 @njit(cache=True, inline="always")
 def _nearest(xy, q, k, lo, h, gx, gy, start, items, best_d, best_i):
-    """The ``k`` nearest points of point ``q`` (itself among them) into best_d/best_i.
+    """Find the ``k`` nearest points of point ``q`` (itself among them); returns how many.
 
     Cells are visited ring by ring around q's cell; after ring r every point not yet
     seen lies farther than r * h, so the search stops once k points are held and the
