@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from . import _config
+from ._grid_knn import bounds, knn
 from ._mesh import collinear_xy as _collinear_xy
 from ._validate import check_points
 from .errors import ConfigError, ScanError
@@ -137,21 +137,6 @@ class HeightField:
         return int(len(self.z))
 
 
-def bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-column minimum and maximum of an (N, D) array, N >= 1.
-
-    Column by column: numpy's ``a.min(axis=0)`` over a tall array of two or three
-    columns is some thirty times slower (2.6 ms against 0.08 ms on 100,000 points).
-
-    Examples
-    --------
-    >>> [v.tolist() for v in bounds(np.array([[0.0, 5.0], [2.0, -1.0]]))]
-    [[0.0, -1.0], [2.0, 5.0]]
-    """
-    cols = range(a.shape[1])
-    return (np.array([a[:, d].min() for d in cols]), np.array([a[:, d].max() for d in cols]))
-
-
 def _rotation(points: np.ndarray, view_axis: str) -> np.ndarray:
     if view_axis in _AXES:
         return _AXES[view_axis].copy()
@@ -176,13 +161,12 @@ def sampling_spacing(xy: np.ndarray, *, max_samples: int = 50_000, seed: int = 0
     >>> round(sampling_spacing(g / 100), 12)
     0.01
     """
-    tree = cKDTree(xy)
     if len(xy) > max_samples:
         rng = np.random.default_rng(seed)
-        q = xy[rng.choice(len(xy), max_samples, replace=False)]
+        at = rng.choice(len(xy), max_samples, replace=False)
     else:
-        q = xy
-    d, _ = tree.query(q, k=min(4, len(xy)))
+        at = np.arange(len(xy))
+    d, _ = knn(xy, at, min(4, len(xy)))
     d = d[:, 1:]
     d = np.where(d > 0, d, np.inf).min(axis=1)
     if not np.isfinite(d).all():
@@ -230,11 +214,10 @@ def fold_fraction(local: np.ndarray, *, max_slope: float = 20.0, k: int = 6,
     z = local[:, 2]
     lo, hi = bounds(xy)
     extent = float(np.linalg.norm(hi - lo))
-    tree = cKDTree(xy)
     idx = np.arange(len(xy))
     if len(xy) > max_samples:
         idx = np.random.default_rng(seed).choice(len(xy), max_samples, replace=False)
-    d, nb = tree.query(xy[idx], k=min(k + 1, len(xy)))
+    d, nb = knn(xy, idx, min(k + 1, len(xy)))
     dz = np.abs(z[nb[:, 1:]] - z[idx, None])
     wall = (dz > max_slope * d[:, 1:]) & (dz > 0.02 * extent)
     return float(np.mean(wall.any(axis=1)))

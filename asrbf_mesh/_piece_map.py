@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._frame import bounds
+from ._grid_knn import bounds
 from ._validate import readonly
 from .errors import ConfigError
 

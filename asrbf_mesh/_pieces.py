@@ -36,12 +36,12 @@ import numpy as np
 
 from ._config import FitConfig
 from ._frame import HeightField
+from ._grid_knn import point_grid, spread
 from ._learn import MIN_POINTS, auto_d_min, learn_polished
 from ._piece import Piece
 from ._piece_map import PieceMap
 from ._polish import drop_idle, extend_and_solve, extend_normal, polish_weights, solve_and_drop
 from ._segment import Segmentation
-from ._tail_kernels import point_grid, spread
 from ._validate import progress as progress_bar
 
 __all__ = ["PiecesLearned", "learn_pieces", "parallel_pieces", "piece_seed", "refine_tails",
@@ -152,9 +152,14 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
                 numba.set_num_threads(threads)
 
         with ThreadPoolExecutor(max_workers=2) as pool:
-            results = list(pool.map(beside, big_first))
+            mapped = pool.map(beside, big_first)
+            # the piece map after the small pieces, while the largest still learns
+            pm = pool.submit(PieceMap.of_points, hf.xy, segmentation.labels, hf.spacing)
+            results = list(mapped)
+            pm = pm.result()
     else:
         results = [one(i) for i in big_first]
+        pm = PieceMap.of_points(hf.xy, segmentation.labels, hf.spacing)
     for i, (idx, piece, res, seq, learned_piece, seconds) in zip(big_first, results, strict=True):
         absres[idx] = res
         if seq is not None:
@@ -168,7 +173,6 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
     if np.isnan(d_min):  # every piece is a constant: report the rule's D_min all the same
         d_min = min(cfg.d_min if cfg.d_min is not None
                     else auto_d_min(hf.spacing, cfg.error_threshold), cfg.d_max)
-    pm = PieceMap.of_points(hf.xy, segmentation.labels, hf.spacing)
     return PiecesLearned(tuple(pieces), pm, absres,  # type: ignore[arg-type]
                          float(absres.mean()) + polish_gain / hf.n_points, steps, d_min,
                          learn_s, polish_s)
@@ -440,9 +444,9 @@ def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
 def _data_slopes(sub: HeightField, grid: tuple, at: np.ndarray, ratio: np.ndarray) -> np.ndarray:
     """Squared slope of the data at points ``at``: a plane through their nearest samples.
 
-    ``grid`` is :func:`~asrbf_mesh._tail_kernels.point_grid` of the piece's points.
+    ``grid`` is :func:`~asrbf_mesh._grid_knn.point_grid` of the piece's points.
     """
-    from ._tail_kernels import plane_slopes
+    from ._grid_knn import plane_slopes
 
     k = min(_SLOPE_NEIGHBOURS, sub.n_points)
     return plane_slopes(sub.xy, sub.z, np.ascontiguousarray(at, np.int64), k,

@@ -180,13 +180,12 @@ def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
 
     A triangle is cut when it is seen nearly edge-on, too long, or without area.
     """
-    p = local[faces]
-    e = p - np.roll(p, 1, axis=1)  # the three edges of each triangle, (F, 3, 3)
-    length = np.linalg.norm(e, axis=2)
-    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    area2 = np.linalg.norm(n, axis=1)
+    from ._segment_kernels import triangle_shapes
+
+    length, area2, nz = triangle_shapes(np.ascontiguousarray(local, np.float64),
+                                        np.ascontiguousarray(faces, np.int64))
     with np.errstate(invalid="ignore", divide="ignore"):
-        facing = np.abs(n[:, 2]) / area2
+        facing = np.abs(nz) / area2
     median = float(np.median(length)) if length.size else 0.0
     cut = ~(area2 > 0) | ~(facing >= math.cos(math.radians(wall_angle_deg)))
     if median > 0:
@@ -196,16 +195,9 @@ def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
 
 def _components(n: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Component label of each vertex over the triangles' edges, and which are used."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from ._segment_kernels import components
 
-    a = faces.ravel()
-    b = faces[:, [1, 2, 0]].ravel()
-    graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n, n))
-    _, comp = connected_components(graph, directed=False)
-    used = np.zeros(n, dtype=bool)
-    used[a] = True
-    return comp.astype(np.int64), used
+    return components(n, np.ascontiguousarray(faces, np.int64))
 
 
 def _stable(labels: np.ndarray) -> np.ndarray:
@@ -310,11 +302,10 @@ def _label(local: np.ndarray, kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         return np.zeros(n, dtype=np.int64), anchor
     comp, used = _components(n, kept)
     if not used.all():
-        from scipy.spatial import cKDTree
+        from ._grid_knn import nearest_3d
 
         anchors = np.flatnonzero(used)
-        _, nearest = cKDTree(local[anchors]).query(local[~used])
-        anchor[~used] = anchors[nearest]
+        anchor[~used] = anchors[nearest_3d(local[anchors], local[~used])]
         comp[~used] = comp[anchor[~used]]
     return _stable(comp), anchor
 
@@ -331,7 +322,7 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     from scipy.sparse import coo_matrix
 
     from ._frame import sampling_spacing
-    from ._segment_kernels import jump_pairs
+    from ._segment_kernels import edge_lengths, jump_pairs
 
     if len(faces) == 0 or jump <= 0 or len(local) < 4:
         return labels, 0
@@ -348,8 +339,7 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     n = len(local)
     graph = coo_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])),
                        shape=(n, n)).tocsr()  # an edge of two triangles sums twice:
-    rows = np.repeat(np.arange(n), np.diff(graph.indptr))  # weigh each once by its length
-    graph.data = np.linalg.norm(local[rows] - local[graph.indices], axis=1)
+    graph.data = edge_lengths(local, graph.indptr, graph.indices)  # each once, by length
     labels = labels.copy()
     n_split = 0
     todo = list(np.unique(labels[jumps[:, 0]]))

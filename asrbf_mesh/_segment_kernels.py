@@ -1,4 +1,8 @@
-"""Compiled helper of segmentation (private): the jump pairs of a scan.
+"""Compiled helpers of segmentation (private): triangle shapes, edge lengths, jump pairs.
+
+:func:`triangle_shapes` and :func:`edge_lengths` measure what numpy measured in passes
+over (F, 3, 3) temporaries (its norm over a last axis of three is slow), with the same
+arithmetic, so the same bits.
 
 A jump pair is two points close in the view plane (within ``radius``) but apart in depth
 by more than ``jump`` and steeper than ``slope``. Found through a bucket grid of cells at
@@ -9,10 +13,89 @@ The public wrapper checks the input and bounds the grid, as numba checks no inde
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
-from ._frame import bounds
+from ._grid_knn import bounds
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def triangle_shapes(local, faces):
+    """Edge lengths (F, 3), twice the area and the normal's depth part of each triangle.
+
+    Edge ``e`` of triangle ``(a, b, c)`` runs to vertex ``e`` from the one before it
+    (``a - c``, ``b - a``, ``c - b``); the normal is ``(b - a) x (c - a)``.
+    """
+    f = faces.shape[0]
+    length = np.empty((f, 3))
+    area2 = np.empty(f)
+    nz = np.empty(f)
+    for t in prange(f):
+        for e in range(3):
+            p = faces[t, e]
+            q = faces[t, (e + 2) % 3]
+            dx = local[p, 0] - local[q, 0]
+            dy = local[p, 1] - local[q, 1]
+            dz = local[p, 2] - local[q, 2]
+            length[t, e] = np.sqrt(dx * dx + dy * dy + dz * dz)
+        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+        ux = local[b, 0] - local[a, 0]
+        uy = local[b, 1] - local[a, 1]
+        uz = local[b, 2] - local[a, 2]
+        vx = local[c, 0] - local[a, 0]
+        vy = local[c, 1] - local[a, 1]
+        vz = local[c, 2] - local[a, 2]
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        n2 = ux * vy - uy * vx
+        area2[t] = np.sqrt(nx * nx + ny * ny + n2 * n2)
+        nz[t] = n2
+    return length, area2, nz
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def edge_lengths(local, indptr, indices):
+    """Length of each edge of a CSR graph over the points (entry ``t`` of row ``i``)."""
+    n = indptr.shape[0] - 1
+    out = np.empty(indices.shape[0])
+    for i in prange(n):
+        for t in range(indptr[i], indptr[i + 1]):
+            j = indices[t]
+            dx = local[i, 0] - local[j, 0]
+            dy = local[i, 1] - local[j, 1]
+            dz = local[i, 2] - local[j, 2]
+            out[t] = np.sqrt(dx * dx + dy * dy + dz * dz)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def components(n, faces):
+    """Component of each of ``n`` points over the triangles' edges (union-find), and used.
+
+    Labels are the smallest point index of each component, so they depend on the
+    triangles' connectivity only; points in no triangle are their own component.
+    """
+    parent = np.arange(n)
+    used = np.zeros(n, np.bool_)
+    for t in range(faces.shape[0]):
+        for e in range(3):
+            a = faces[t, e]
+            used[a] = True
+            b = faces[t, (e + 1) % 3]
+            while parent[a] != a:  # path halving
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            while parent[b] != b:
+                parent[b] = parent[parent[b]]
+                b = parent[b]
+            if a < b:
+                parent[b] = a
+            elif b < a:
+                parent[a] = b
+    for i in range(n):  # the root of i's component, its smallest index, is below i
+        parent[i] = parent[parent[i]]
+    return parent, used
+
 
 #: The bucket grid has at most this many cells per point (wider cells beyond).
 _CELLS_PER_POINT = 4

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from asrbf_mesh._tail_kernels import _nearest, plane_slopes, point_grid, spread
+from asrbf_mesh._grid_knn import _nearest, plane_slopes, point_grid, spread
 
 
 def _clouds() -> dict[str, np.ndarray]:
