@@ -204,7 +204,7 @@ def nearest_3d(pts: np.ndarray, queries: np.ndarray) -> np.ndarray:
     --------
     >>> p = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 5.0], [2.0, 0.0, 0.0]])
     >>> nearest_3d(p, np.array([[0.1, 0.0, 0.2], [1.9, 0.0, 4.0]])).tolist()
-    [0, 2]
+    [0, 1]
     """
     pts = np.ascontiguousarray(pts, dtype=np.float64)
     queries = np.ascontiguousarray(queries, dtype=np.float64)

@@ -70,3 +70,44 @@ def test_spread_is_the_greedy_subset_in_order(radius: float) -> None:
             kept.append(i)
     assert spread(xy, radius).tolist() == kept
     assert spread(np.zeros((0, 2)), radius).tolist() == []
+
+
+@pytest.mark.parametrize("name", list(_clouds()))
+def test_knn_and_nearest_3d_match_a_kd_tree(name: str) -> None:
+    from asrbf_mesh._grid_knn import knn, nearest_3d
+
+    xy = _clouds()[name]
+    rng = np.random.default_rng(2)
+    k = min(4, len(xy))
+    at = np.arange(0, len(xy), 2)
+    d, i = knn(xy, at, k)
+    ref_d, _ = cKDTree(xy).query(xy[at], k=k)
+    np.testing.assert_array_equal(d, ref_d.reshape(d.shape))
+    np.testing.assert_allclose(np.hypot(*(xy[i] - xy[at, None]).transpose(2, 0, 1)), d,
+                               atol=1e-15)
+    pts = np.c_[xy, rng.normal(size=len(xy))]  # depth: the 3D nearest need not be near in xy
+    q = np.c_[rng.random((50, 2)) * np.ptp(xy, axis=0) + xy.min(axis=0), rng.normal(size=50)]
+    got = nearest_3d(pts, q)
+    ref_d, _ = cKDTree(pts).query(q)
+    np.testing.assert_allclose(np.linalg.norm(pts[got] - q, axis=1), ref_d, rtol=1e-12)
+    with pytest.raises(ValueError, match="k must be"):
+        knn(xy, at, len(xy) + 1)
+
+
+def test_components_by_union_find_match_scipy() -> None:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from asrbf_mesh._segment_kernels import components
+
+    rng = np.random.default_rng(3)
+    faces = rng.integers(0, 400, size=(150, 3))
+    comp, used = components(500, faces)
+    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
+    _, ref = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(500, 500)),
+                                  directed=False)
+    # the same partition; labels are each component's smallest point
+    assert all(len(set(comp[ref == c])) == 1 for c in np.unique(ref))
+    assert len(np.unique(comp)) == len(np.unique(ref))
+    assert np.all(comp <= np.arange(500)) and np.all(comp[comp] == comp)
+    assert used.tolist() == np.isin(np.arange(500), faces).tolist()
