@@ -319,10 +319,10 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     points of a cliff's wall belong to the piece of their nearest kept point, and the
     bisector between the cliff's upper and lower sides runs through its wall.
     """
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import csr_matrix
 
     from ._frame import sampling_spacing
-    from ._segment_kernels import edge_lengths, jump_pairs
+    from ._segment_kernels import edge_graph, edge_lengths, jump_pairs
 
     if len(faces) == 0 or jump <= 0 or len(local) < 4:
         return labels, 0
@@ -334,12 +334,9 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     jumps = jump_pairs(local, radius, slope, jump)  # close in the view plane, far in depth
     if len(jumps) < _MIN_CLIFF_PAIRS:
         return labels, 0
-    a = faces.ravel()
-    b = faces[:, [1, 2, 0]].ravel()
     n = len(local)
-    graph = coo_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])),
-                       shape=(n, n)).tocsr()  # an edge of two triangles sums twice:
-    graph.data = edge_lengths(local, graph.indptr, graph.indices)  # each once, by length
+    indptr, indices = edge_graph(n, np.ascontiguousarray(faces, np.int64))
+    graph = csr_matrix((edge_lengths(local, indptr, indices), indices, indptr), shape=(n, n))
     labels = labels.copy()
     n_split = 0
     todo = list(np.unique(labels[jumps[:, 0]]))

@@ -53,6 +53,40 @@ def triangle_shapes(local, faces):
     return length, area2, nz
 
 
+@njit(cache=True, nogil=True)
+def edge_graph(n, faces):
+    """CSR ``(indptr, indices)`` of the triangles' edges over ``n`` points, both ways.
+
+    Each row's neighbours sorted and once each (an edge of two triangles is one entry):
+    the structure scipy's ``coo_matrix(...).tocsr()`` gives, built in one pass.
+    """
+    count = np.zeros(n + 1, np.int64)
+    for t in range(faces.shape[0]):
+        for e in range(3):
+            count[faces[t, e] + 1] += 2  # the edges to the next and the previous vertex
+    for i in range(n):
+        count[i + 1] += count[i]
+    fill = count[:-1].copy()
+    raw = np.empty(count[n], np.int64)
+    for t in range(faces.shape[0]):
+        for e in range(3):
+            a = faces[t, e]
+            raw[fill[a]] = faces[t, (e + 1) % 3]
+            raw[fill[a] + 1] = faces[t, (e + 2) % 3]
+            fill[a] += 2
+    indptr = np.zeros(n + 1, np.int64)
+    indices = np.empty(count[n], np.int64)
+    m = 0
+    for i in range(n):
+        row = np.sort(raw[count[i]:count[i + 1]])
+        for k in range(row.shape[0]):
+            if k == 0 or row[k] != row[k - 1]:
+                indices[m] = row[k]
+                m += 1
+        indptr[i + 1] = m
+    return indptr, indices[:m].copy()
+
+
 @njit(cache=True, parallel=True, nogil=True)
 def edge_lengths(local, indptr, indices):
     """Length of each edge of a CSR graph over the points (entry ``t`` of row ``i``)."""
