@@ -8,8 +8,10 @@ box and points outside the box are still evaluated exactly.
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, njit, prange, set_num_threads
 
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
 
@@ -523,6 +525,21 @@ def _warm_threads(n):
     for i in prange(n):
         out[i] = i
     return out
+
+
+@contextlib.contextmanager
+def numba_threads(n: int):
+    """Run the block with numba's parallel kernels on ``n`` threads (this thread only).
+
+    For work beside other work (a second Python thread): on one thread its kernels
+    start no team of their own to compete for the cores the other thread's use.
+    """
+    threads = get_num_threads()
+    set_num_threads(max(1, min(n, threads)))
+    try:
+        yield
+    finally:
+        set_num_threads(threads)
 
 
 def warm_threads() -> None:

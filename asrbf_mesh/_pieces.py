@@ -138,18 +138,15 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
 
     big_first = [int(i) for i in np.argsort(-sizes, kind="stable")]
     if int(learned.sum()) >= 2 and parallel_pieces():
-        import numba
-
-        threads = numba.get_num_threads()
+        from ._network_kernels import numba_threads
 
         def beside(i: int) -> tuple:
             # the other pieces learn on one numba thread (the setting is per thread):
             # their parallel kernels would take cores from the largest piece's
-            numba.set_num_threads(threads if i == big_first[0] else 1)
-            try:
+            if i == big_first[0]:
                 return one(i)
-            finally:
-                numba.set_num_threads(threads)
+            with numba_threads(1):
+                return one(i)
 
         with ThreadPoolExecutor(max_workers=2) as pool:
             mapped = pool.map(beside, big_first)
