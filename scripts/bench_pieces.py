@@ -41,9 +41,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--lod", action="store_true",
                     help="only the LOD part: 4 resample levels per scan, model and seed")
+    ap.add_argument("--ratio", type=int, metavar="REPS", default=0,
+                    help="only the fit-time ratio: REPS interleaved fits per model and seed")
     args = ap.parse_args(argv)
     if args.lod:
         return lod_main(args.seeds)
+    if args.ratio:
+        return ratio_main(args.seeds, args.ratio)
     found = scans()
     warm = next(iter(found.values()))
     with warnings.catch_warnings():
@@ -144,6 +148,50 @@ def lod_main(seeds: list[int]) -> int:
             + table(LOD_HEADERS, rows))
     print(body)
     write_section("pieces-lod", body)
+    return 0
+
+
+def ratio_main(seeds: list[int], reps: int) -> int:
+    """Fit seconds of the piecewise model over the single network's, per scan and seed.
+
+    The two fits alternate (pieces, single, pieces, ...) ``reps`` times per seed and each
+    keeps its fastest run: on a shared machine a slow run says more about the neighbours
+    than about the code, and alternating gives both models the same conditions.
+    """
+    found = scans()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for scan in found.values():  # compile the kernels and warm the caches first
+            am.fit(scan, seed=0, progress=False)
+            am.fit(scan, seed=0, pieces=1, progress=False)
+    t0 = time.perf_counter()
+    rows = []
+    for name, scan in found.items():
+        best = {m: {s: np.inf for s in seeds} for m in ("auto", "1")}
+        for _ in range(reps):
+            for seed in seeds:
+                for m in best:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        _, sec = timed(am.fit, scan, seed=seed, pieces=m, progress=False)
+                    best[m][seed] = min(best[m][seed], sec)
+        ratio = [best["auto"][s] / best["1"][s] for s in seeds]
+        print(f"{name}: " + ", ".join(f"{r:.2f}" for r in ratio), flush=True)
+        rows.append([name, median_worst([best["1"][s] for s in seeds], ".3f"),
+                     median_worst([best["auto"][s] for s in seeds], ".3f"),
+                     median_worst(ratio, ".2f"), ", ".join(f"{r:.2f}" for r in ratio)])
+    seeds_s = ", ".join(map(str, seeds))
+    body = (f"## Piecewise fit time against the single fit (issue 14): seeds {seeds_s}\n\n"
+            f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
+            f"`python scripts/bench_pieces.py --ratio {reps} --seeds {' '.join(map(str, seeds))}`"
+            f" ({time.perf_counter() - t0:.0f} s)._\n\n"
+            f"`am.fit(scan)` (pieces) and `am.fit(scan, pieces=1)` (single) alternate {reps} "
+            "times per seed; each keeps its fastest run (wall-clock seconds of the fit, "
+            "the frame and the cut into pieces included). Cells: median over the seeds "
+            "(worst seed).\n\n"
+            + table(["scan", "single s", "pieces s", "pieces / single", "per seed"], rows))
+    print(body)
+    write_section("pieces-time", body)
     return 0
 
 
