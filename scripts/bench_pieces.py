@@ -154,10 +154,14 @@ def lod_main(seeds: list[int]) -> int:
 def ratio_main(seeds: list[int], reps: int) -> int:
     """Fit seconds of the piecewise model over the single network's, per scan and seed.
 
-    The two fits alternate (pieces, single, pieces, ...) ``reps`` times per seed and each
-    keeps its fastest run: on a shared machine a slow run says more about the neighbours
-    than about the code, and alternating gives both models the same conditions.
+    The fits alternate (pieces, single, and two variants of pieces that say where its
+    extra time goes: the cut into pieces given, and no tail refinement) ``reps`` times
+    per seed and each keeps its fastest run: on a shared machine a slow run says more
+    about the neighbours than about the code, and alternating gives every model the same
+    conditions.
     """
+    import asrbf_mesh._pieces as pieces_mod
+
     found = scans()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -166,30 +170,46 @@ def ratio_main(seeds: list[int], reps: int) -> int:
             am.fit(scan, seed=0, pieces=1, progress=False)
     t0 = time.perf_counter()
     rows = []
+    rounds = pieces_mod.TAIL_ROUNDS
     for name, scan in found.items():
-        best = {m: {s: np.inf for s in seeds} for m in ("auto", "1")}
-        for _ in range(reps):
-            for seed in seeds:
-                for m in best:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore")
-                        _, sec = timed(am.fit, scan, seed=seed, pieces=m, progress=False)
-                    best[m][seed] = min(best[m][seed], sec)
+        cut = am.segment(am.Mesh(scan.points, scan.faces))
+        runs = {"auto": ("auto", rounds), "1": (1, rounds), "cut": (cut, rounds),
+                "no tails": ("auto", 0)}
+        best = {m: {s: np.inf for s in seeds} for m in runs}
+        try:
+            for _ in range(reps):
+                for seed in seeds:
+                    for m, (pieces, tail_rounds) in runs.items():
+                        pieces_mod.TAIL_ROUNDS = tail_rounds
+                        with warnings.catch_warnings():
+                            warnings.simplefilter("ignore")
+                            _, sec = timed(am.fit, scan, seed=seed, pieces=pieces,
+                                           progress=False)
+                        best[m][seed] = min(best[m][seed], sec)
+        finally:
+            pieces_mod.TAIL_ROUNDS = rounds
         ratio = [best["auto"][s] / best["1"][s] for s in seeds]
         print(f"{name}: " + ", ".join(f"{r:.2f}" for r in ratio), flush=True)
         rows.append([name, median_worst([best["1"][s] for s in seeds], ".3f"),
                      median_worst([best["auto"][s] for s in seeds], ".3f"),
-                     median_worst(ratio, ".2f"), ", ".join(f"{r:.2f}" for r in ratio)])
+                     median_worst(ratio, ".2f"), ", ".join(f"{r:.2f}" for r in ratio),
+                     median_worst([best["cut"][s] for s in seeds], ".3f"),
+                     median_worst([best["no tails"][s] for s in seeds], ".3f")])
     seeds_s = ", ".join(map(str, seeds))
     body = (f"## Piecewise fit time against the single fit (issue 14): seeds {seeds_s}\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --ratio {reps} --seeds {' '.join(map(str, seeds))}`"
             f" ({time.perf_counter() - t0:.0f} s)._\n\n"
             f"`am.fit(scan)` (pieces) and `am.fit(scan, pieces=1)` (single) alternate {reps} "
-            "times per seed; each keeps its fastest run (wall-clock seconds of the fit, "
-            "the frame and the cut into pieces included). Cells: median over the seeds "
-            "(worst seed).\n\n"
-            + table(["scan", "single s", "pieces s", "pieces / single", "per seed"], rows))
+            "times per seed with two variants of pieces; each keeps its fastest run "
+            "(wall-clock seconds of the fit, the frame and the cut into pieces included). "
+            "*Cut given*: the segmentation passed in (`pieces=am.segment(...)`), so the fit "
+            "skips the cut that otherwise runs beside the frame; *no tails*: no tail "
+            "refinement (`_pieces.TAIL_ROUNDS = 0`). The piecewise model's extra time over "
+            "the single network is the gap between its column and these. Cells: median over "
+            "the seeds (worst seed).\n\n"
+            + table(["scan", "single s", "pieces s", "pieces / single", "per seed",
+                     "pieces, cut given s", "pieces, no tails s"], rows))
     print(body)
     write_section("pieces-time", body)
     return 0
