@@ -275,12 +275,14 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     a neuron ``u = x, sigma = max(psi ||x - u_near||, D_min / 2)`` (the growth rule of
     learning) whose weight is solved by least squares over the points under it, the
     other neurons fixed (one global solve costs as much as the polish; these cost a
-    fraction). Stops when no point is left above the threshold, after ``TAIL_ROUNDS`` or
-    at the neuron cap (``max_neurons``).
+    fraction). Each round extends the weight polish's normal equations (``polished``,
+    its :class:`~asrbf_mesh._polish.PolishResult`) by the new neurons' columns, over the
+    points under them (:func:`~asrbf_mesh._polish.extend_normal`), and takes that solve
+    from them (:func:`_appended_weights`). Stops when no point is left above the
+    threshold, after ``TAIL_ROUNDS`` or at the neuron cap (``max_neurons``).
 
-    Then all the weights are solved together once, from the weight polish's normal
-    equations (``polished``, its :class:`~asrbf_mesh._polish.PolishResult`) extended by
-    the new neurons' rows (:func:`~asrbf_mesh._polish.extend_normal`), and the neurons
+    Then all the weights are solved together once, from those extended normal
+    equations, and the neurons
     the network hardly needs are dropped one at a time, the cheapest first, while a
     removal raises the sum of squared errors by less than ``IDLE_RSS`` x E^2 (twelve
     points off by E) and the removals together give back at most ``IDLE_GIVE_BACK`` of
