@@ -155,11 +155,11 @@ def knn(xy: np.ndarray, at: np.ndarray, k: int, grid: tuple | None = None
     return np.sqrt(d2), idx
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@njit(cache=True, nogil=True)
 def _nearest_3d(pts, queries, lo, h, gx, gy, start, items):
     m = queries.shape[0]
     out = np.empty(m, np.int64)
-    for i in prange(m):
+    for i in range(m):
         x = queries[i, 0]
         y = queries[i, 1]
         z = queries[i, 2]
@@ -213,39 +213,30 @@ def nearest_3d(pts: np.ndarray, queries: np.ndarray) -> np.ndarray:
     return _nearest_3d(pts, queries, *point_grid(pts[:, :2]))
 
 
-@njit(cache=True, parallel=True, nogil=True)
-def plane_slopes(xy, z, at, k, ratio_x, ratio_y, lo, h, gx, gy, start, items):
-    """Squared slope of the plane through each point ``at[m]``'s ``k`` nearest samples.
-
-    The plane ``z = c + s . (x - mean)`` by least squares over the samples (its 2 x 2
-    normal matrix ridged by 1e-12), ``s`` scaled by ``(ratio_x, ratio_y)`` (depth over
-    the xy scales: physical proportions); returns ``|s|^2`` per point.
-    """
-    m = at.shape[0]
+@njit(cache=True, nogil=True)
+def _planes(xy, z, idx, ratio_x, ratio_y):
+    m, k = idx.shape
     out = np.empty(m)
-    for i in prange(m):
-        best_d = np.empty(k)
-        best_i = np.empty(k, np.int64)
-        held = _nearest(xy, at[i], k, lo, h, gx, gy, start, items, best_d, best_i)
+    for i in range(m):
         mx = 0.0
         my = 0.0
         mz = 0.0
-        for t in range(held):
-            mx += xy[best_i[t], 0]
-            my += xy[best_i[t], 1]
-            mz += z[best_i[t]]
-        mx /= held
-        my /= held
-        mz /= held
+        for t in range(k):
+            mx += xy[idx[i, t], 0]
+            my += xy[idx[i, t], 1]
+            mz += z[idx[i, t]]
+        mx /= k
+        my /= k
+        mz /= k
         sxx = 1e-12
         syy = 1e-12
         sxy = 0.0
         sxz = 0.0
         syz = 0.0
-        for t in range(held):
-            dx = xy[best_i[t], 0] - mx
-            dy = xy[best_i[t], 1] - my
-            dz = z[best_i[t]] - mz
+        for t in range(k):
+            dx = xy[idx[i, t], 0] - mx
+            dy = xy[idx[i, t], 1] - my
+            dz = z[idx[i, t]] - mz
             sxx += dx * dx
             syy += dy * dy
             sxy += dx * dy
@@ -256,6 +247,21 @@ def plane_slopes(xy, z, at, k, ratio_x, ratio_y, lo, h, gx, gy, start, items):
         sy = (sxx * syz - sxy * sxz) / det * ratio_y
         out[i] = sx * sx + sy * sy
     return out
+
+
+def plane_slopes(xy: np.ndarray, z: np.ndarray, at: np.ndarray, k: int, ratio_x: float,
+                 ratio_y: float, *grid) -> np.ndarray:
+    """Squared slope of the plane through each point ``at[m]``'s ``k`` nearest samples.
+
+    The plane ``z = c + s . (x - mean)`` by least squares over the samples (its 2 x 2
+    normal matrix ridged by 1e-12), ``s`` scaled by ``(ratio_x, ratio_y)`` (depth over
+    the xy scales: physical proportions); returns ``|s|^2`` per point. ``grid`` is
+    :func:`point_grid` of ``xy``.
+    """
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    _, idx = _knn(xy, np.ascontiguousarray(at, np.int64), int(k), *grid)
+    return _planes(xy, np.ascontiguousarray(z, np.float64), idx, float(ratio_x),
+                   float(ratio_y))
 
 
 @njit(cache=True, nogil=True)

@@ -448,5 +448,4 @@ def _data_slopes(sub: HeightField, grid: tuple, at: np.ndarray, ratio: np.ndarra
     from ._grid_knn import plane_slopes
 
     k = min(_SLOPE_NEIGHBOURS, sub.n_points)
-    return plane_slopes(sub.xy, sub.z, np.ascontiguousarray(at, np.int64), k,
-                        float(ratio[0]), float(ratio[1]), *grid)
+    return plane_slopes(sub.xy, sub.z, at, k, float(ratio[0]), float(ratio[1]), *grid)

@@ -13,13 +13,13 @@ The public wrapper checks the input and bounds the grid, as numba checks no inde
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
 from ._grid_knn import bounds
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@njit(cache=True, nogil=True)
 def triangle_shapes(local, faces):
     """Edge lengths (F, 3), twice the area and the normal's depth part of each triangle.
 
@@ -30,7 +30,7 @@ def triangle_shapes(local, faces):
     length = np.empty((f, 3))
     area2 = np.empty(f)
     nz = np.empty(f)
-    for t in prange(f):
+    for t in range(f):
         for e in range(3):
             p = faces[t, e]
             q = faces[t, (e + 2) % 3]
@@ -78,21 +78,29 @@ def edge_graph(n, faces):
     indices = np.empty(count[n], np.int64)
     m = 0
     for i in range(n):
-        row = np.sort(raw[count[i]:count[i + 1]])
-        for k in range(row.shape[0]):
-            if k == 0 or row[k] != row[k - 1]:
-                indices[m] = row[k]
+        a = count[i]
+        b = count[i + 1]
+        for p in range(a + 1, b):  # insertion sort: a vertex has a few neighbours
+            v = raw[p]
+            q = p - 1
+            while q >= a and raw[q] > v:
+                raw[q + 1] = raw[q]
+                q -= 1
+            raw[q + 1] = v
+        for p in range(a, b):
+            if p == a or raw[p] != raw[p - 1]:
+                indices[m] = raw[p]
                 m += 1
         indptr[i + 1] = m
     return indptr, indices[:m].copy()
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@njit(cache=True, nogil=True)
 def edge_lengths(local, indptr, indices):
     """Length of each edge of a CSR graph over the points (entry ``t`` of row ``i``)."""
     n = indptr.shape[0] - 1
     out = np.empty(indices.shape[0])
-    for i in prange(n):
+    for i in range(n):
         for t in range(indptr[i], indptr[i + 1]):
             j = indices[t]
             dx = local[i, 0] - local[j, 0]

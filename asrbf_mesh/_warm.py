@@ -1,16 +1,17 @@
 """A first run compiles two things at once: the learning kernel here, the others beside it.
 
 numba compiles a kernel the first time it is called and caches the machine code; a fresh
-install therefore spends its first fit compiling, most of it (about 8 s of 16 s on the
-benchmark machine) on the learning kernel. Compilation holds a process-wide lock, so
-threads cannot share the work, but processes can: while a command that learns compiles
-the learning kernel, :func:`alongside` runs a helper process (``python -m
-asrbf_mesh._warm``) that compiles the other kernels the command needs (the cut into
-pieces, the weight polish, evaluation, reconstruction) and writes them to numba's cache,
-where the command finds them. ``asrbf demo`` compiles the learning kernel before anything else, so
-that the helper's first kernels (the cut into pieces) are ready when the demo needs them.
-Nothing starts when the learning kernel is cached already, and the helper never outlives
-the command.
+install therefore spends its first fit compiling, most of it (about 8 s on the benchmark
+machine) on the learning kernel. Compilation holds a process-wide lock, so threads cannot
+share the work, but processes can: while a command that learns compiles the learning
+kernel, :func:`alongside` runs a helper process (``python -m asrbf_mesh._warm``) that
+compiles the other kernels the command needs and writes them to numba's cache, where the
+command finds them. The helper starts with what a fit needs right after learning (the
+weight polish, the tail refinement, evaluation, reconstruction), because a command compiles
+the frame's measures and the cut into pieces itself before it learns; it ends with those
+(for ``asrbf demo``, which compiles the learning kernel before anything else). Nothing
+starts when the learning kernel is cached already, and the helper never outlives the
+command.
 """
 
 from __future__ import annotations
@@ -79,6 +80,9 @@ def compile_after_learning() -> None:
     from ._frame import to_height_field
     from ._mesh import Mesh
     from ._network import Network
+    from ._outliers import isolated_points
+    from ._piece_map import PieceMap
+    from ._pieces import refine_tails
     from ._polish import polish_weights
     from ._segment import segment
     from ._surface import grid_faces, reconstruct
@@ -87,23 +91,31 @@ def compile_after_learning() -> None:
     rng = np.random.default_rng(0)
     x, y = (a.ravel().astype(np.float64) for a in np.meshgrid(np.arange(40), np.arange(40)))
     faces = grid_faces(40, 40)
-    # first what a fit needs first: the cut into pieces, here of a ramp winding once
-    # around a point (a cliff along one ray: jump pairs, then the geodesic split)
-    ramp = 10.0 * (np.arctan2(y - 20.3, x - 19.7) % (2 * np.pi)) / (2 * np.pi)
-    segment(Mesh(np.c_[x, y, ramp], faces))
     pts = np.c_[x, y, 4.0 * np.sin(0.1 * x) * np.cos(0.07 * y)]
-    hf = to_height_field(pts)
+    hf = to_height_field(pts)  # (its measures: compiled here if the command has not yet)
     cfg = FitConfig()
     centers = rng.random((30, 2))
     widths = np.full(30, 0.2)
     weights = rng.normal(0.0, 0.05, 30)
+    # first what a fit needs right after learning (the command compiles the frame's
+    # measures, the cut into pieces and the learning kernel itself meanwhile): the
+    # polish, then the tails (data slopes, spread, appended columns, solve and drop)
     pr = polish_weights(hf.xy, hf.z, 0.0, centers, widths, weights, cfg.support,
                         cfg.polish_ridge)
+    refine_tails(hf, cfg.replace(error_threshold=0.001), pr.a0, pr.centers, pr.widths,
+                 pr.weights, 0.05, pr)
     net = Network(pr.a0, pr.centers, pr.widths, pr.weights, hf.frame, cfg)
     net.evaluate(rng.random((10_000, 2)), unit=True)  # the threaded kernel
     net.evaluate(rng.random((100, 2)), unit=True)  # the serial one
     net.gradient(rng.random((100, 2)), unit=True)
     reconstruct(net, footprint=Mesh(pts, faces))
+    # last what the command compiles before learning anyway (for the other commands): the
+    # cut into pieces, of a ramp winding once around a point (a cliff along one ray: jump
+    # pairs, then the geodesic split) with one point in no triangle (its nearest anchor)
+    isolated_points(pts)
+    ramp = 10.0 * (np.arctan2(y - 20.3, x - 19.7) % (2 * np.pi)) / (2 * np.pi)
+    seg = segment(Mesh(np.r_[np.c_[x, y, ramp], [[20.5, 20.5, 0.0]]], faces))
+    PieceMap.of_points(hf.xy, seg.labels[:-1], hf.spacing)
 
 
 if __name__ == "__main__":  # pragma: no cover - the helper process
