@@ -37,15 +37,29 @@ def bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 _PER_CELL = 2.0
 
 
+def robust_box(xy: np.ndarray, share: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
+    """Return the box of (N, 2) points without their outer ``share`` on each side and axis.
+
+    Percentiles of at most 8,192 of the points (evenly strided): a grid over the whole
+    box of a scan with one stray point far away would put every other point in one cell.
+    Points outside are clamped into the border cells, which keeps every search exact
+    (clamping only brings points closer in cell index).
+    """
+    sample = xy[::max(1, len(xy) // 8192)]
+    lo, hi = np.percentile(sample, [100 * share, 100 * (1 - share)], axis=0)
+    return lo, np.maximum(hi, lo)
+
+
 def point_grid(xy: np.ndarray) -> tuple[np.ndarray, float, int, int, np.ndarray, np.ndarray]:
     """Return a uniform grid of (N, 2) points: ``(lo, h, gx, gy, start, items)``.
 
-    Cells of side ``h`` (about :data:`_PER_CELL` points each over the bounding box),
-    ``gx`` x ``gy`` of them, row-major; the points of cell ``c`` are
-    ``items[start[c]:start[c + 1]]``, in their order.
+    Cells of side ``h`` (about :data:`_PER_CELL` points each over the points' robust box,
+    :func:`robust_box`; points beyond it in the border cells), ``gx`` x ``gy`` of them,
+    row-major; the points of cell ``c`` are ``items[start[c]:start[c + 1]]``, in their
+    order.
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64)
-    lo, hi = bounds(xy)
+    lo, hi = robust_box(xy)
     ext = np.maximum(hi - lo, 1e-300)
     n = len(xy)
     # by area; a thin box (points on a line: no area) by its longer side
@@ -56,15 +70,19 @@ def point_grid(xy: np.ndarray) -> tuple[np.ndarray, float, int, int, np.ndarray,
     return lo, h, gx, gy, start, items
 
 
+@njit(cache=True, inline="always")
+def _index(v, lo, h, g):
+    """Cell index of coordinate ``v``, clamped to ``0 .. g - 1`` before the conversion."""
+    return int(min(max((v - lo) / h, 0.0), g - 1.0))
+
+
 @njit(cache=True, nogil=True)
 def _bin(xy, lo, h, gx, gy):
     n = xy.shape[0]
     cell = np.empty(n, np.int64)
     start = np.zeros(gx * gy + 1, np.int64)
     for i in range(n):
-        cx = min(max(int((xy[i, 0] - lo[0]) / h), 0), gx - 1)
-        cy = min(max(int((xy[i, 1] - lo[1]) / h), 0), gy - 1)
-        cell[i] = cy * gx + cx
+        cell[i] = _index(xy[i, 1], lo[1], h, gy) * gx + _index(xy[i, 0], lo[0], h, gx)
         start[cell[i] + 1] += 1
     for c in range(gx * gy):
         start[c + 1] += start[c]
@@ -86,8 +104,8 @@ def _nearest(xy, q, k, lo, h, gx, gy, start, items, best_d, best_i):
     """
     x = xy[q, 0]
     y = xy[q, 1]
-    cx = min(max(int((x - lo[0]) / h), 0), gx - 1)
-    cy = min(max(int((y - lo[1]) / h), 0), gy - 1)
+    cx = _index(x, lo[0], h, gx)
+    cy = _index(y, lo[1], h, gy)
     held = 0
     r = 0
     rmax = max(gx, gy)
@@ -163,8 +181,8 @@ def _nearest_3d(pts, queries, lo, h, gx, gy, start, items):
         x = queries[i, 0]
         y = queries[i, 1]
         z = queries[i, 2]
-        cx = min(max(int((x - lo[0]) / h), 0), gx - 1)
-        cy = min(max(int((y - lo[1]) / h), 0), gy - 1)
+        cx = _index(x, lo[0], h, gx)
+        cy = _index(y, lo[1], h, gy)
         best = np.inf
         arg = -1
         for r in range(max(gx, gy) + 1):

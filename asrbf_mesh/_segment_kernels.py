@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
-from ._grid_knn import bounds
+from ._grid_knn import robust_box
 
 
 @njit(cache=True, nogil=True)
@@ -157,15 +157,16 @@ def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> n
         raise ValueError("jump_pairs: points must be a finite (N, 3) array")
     if not (radius > 0 and np.isfinite(radius)) or len(pts) < 2:
         return np.zeros((0, 2), dtype=np.int64)
-    lo, hi = bounds(pts[:, :2])
+    # the points' robust box (points beyond it in the border cells: clamping only brings
+    # cells closer, so no pair is missed): a far stray point would put all the others in
+    # one cell. Cells at least radius wide, and no more than a few per point
+    lo, hi = robust_box(pts[:, :2])
     span = hi - lo
-    # cells at least radius wide, and no more than a few per point (a far stray point
-    # would otherwise ask for a grid of billions of cells)
     cell = max(radius, float(np.sqrt(span[0] * span[1] / (_CELLS_PER_POINT * len(pts)))),
                float(span.max()) / 65536.0)
     nx = int(span[0] / cell) + 1
     ny = int(span[1] / cell) + 1
-    ij = np.minimum(((pts[:, :2] - lo) / cell).astype(np.int64), [nx - 1, ny - 1])
+    ij = np.clip((pts[:, :2] - lo) / cell, 0.0, [nx - 1, ny - 1]).astype(np.int64)
     key = ij[:, 1] * nx + ij[:, 0]
     order = np.argsort(key, kind="stable")
     start = np.searchsorted(key[order], np.arange(nx * ny + 1))

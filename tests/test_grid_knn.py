@@ -111,3 +111,27 @@ def test_components_by_union_find_match_scipy() -> None:
     assert len(np.unique(comp)) == len(np.unique(ref))
     assert np.all(comp <= np.arange(500)) and np.all(comp[comp] == comp)
     assert used.tolist() == np.isin(np.arange(500), faces).tolist()
+
+
+def test_a_far_stray_point_does_not_put_the_others_in_one_cell() -> None:
+    # the grid spans the points' robust box; the stray sits in a border cell, found exactly
+    from asrbf_mesh._grid_knn import knn
+
+    rng = np.random.default_rng(4)
+    xy = np.r_[rng.random((2000, 2)), [[1e9, 0.5]], [[-3e12, -7e11]]]
+    lo, h, gx, gy, start, items = point_grid(xy)
+    assert gx * gy >= 500 and np.diff(start).max() < 40
+    d, _ = knn(xy, np.arange(len(xy)), 3)
+    ref, _ = cKDTree(xy).query(xy, k=3)
+    np.testing.assert_array_equal(d, ref)
+
+
+def test_jump_pairs_are_the_same_with_a_far_stray_point() -> None:
+    from asrbf_mesh._segment_kernels import jump_pairs
+
+    x, y = np.meshgrid(np.arange(60.0), np.arange(50.0))
+    pts = np.c_[x.ravel(), y.ravel(), np.where(x.ravel() < 30, 0.0, 10.0)]
+    stray = np.r_[pts, [[1e9, 3.0, 0.0]]]
+    got = jump_pairs(stray, 1.5, 5.0, 2.0)
+    assert len(got) > 40
+    np.testing.assert_array_equal(got, jump_pairs(pts, 1.5, 5.0, 2.0))
