@@ -94,18 +94,20 @@ def _bin(xy, lo, h, gx, gy):
     return start, items
 
 
-@njit(cache=True, inline="always")
-def _nearest(xy, q, k, lo, h, gx, gy, start, items, best_d, best_i):
-    """Find the ``k`` nearest points of point ``q`` (itself among them); returns how many.
+@njit(cache=True, nogil=True)
+def _nearest(pts, q, k, lo, h, gx, gy, start, items, best_d, best_i):
+    """Find the ``k`` points of ``pts`` nearest to ``q``; returns how many it found.
 
-    Cells are visited ring by ring around q's cell; after ring r every point not yet
-    seen lies farther than r * h, so the search stops once k points are held and the
-    k-th is within that. Ties keep the point met first (rings, then the cells' order).
+    ``pts`` (N, D) and ``q`` (D,): the distance is over all D coordinates, the grid bins
+    the first two (the others only add to a distance). Squared distances go to
+    ``best_d``, indices to ``best_i``, nearest first. Cells are visited ring by ring
+    around q's cell; after ring r every point not yet seen lies farther than r * h, so
+    the search stops once k points are held and the k-th is within that. Ties keep the
+    point met first (rings, then the cells' order).
     """
-    x = xy[q, 0]
-    y = xy[q, 1]
-    cx = _index(x, lo[0], h, gx)
-    cy = _index(y, lo[1], h, gy)
+    dims = pts.shape[1]
+    cx = _index(q[0], lo[0], h, gx)
+    cy = _index(q[1], lo[1], h, gy)
     held = 0
     r = 0
     rmax = max(gx, gy)
@@ -121,9 +123,10 @@ def _nearest(xy, q, k, lo, h, gx, gy, start, items, best_d, best_i):
                     c = yy * gx + xx
                     for t in range(start[c], start[c + 1]):
                         j = items[t]
-                        dx = xy[j, 0] - x
-                        dy = xy[j, 1] - y
-                        d = dx * dx + dy * dy
+                        d = 0.0
+                        for e in range(dims):
+                            diff = pts[j, e] - q[e]
+                            d += diff * diff
                         if held < k or d < best_d[held - 1]:
                             p = held if held < k else k - 1
                             while p > 0 and best_d[p - 1] > d:  # insertion, stable
@@ -147,7 +150,7 @@ def _knn(xy, at, k, lo, h, gx, gy, start, items):
     dist = np.empty((m, k))
     idx = np.empty((m, k), np.int64)
     for i in prange(m):
-        _nearest(xy, at[i], k, lo, h, gx, gy, start, items, dist[i], idx[i])
+        _nearest(xy, xy[at[i]], k, lo, h, gx, gy, start, items, dist[i], idx[i])
     return dist, idx
 
 
@@ -175,39 +178,12 @@ def knn(xy: np.ndarray, at: np.ndarray, k: int, grid: tuple | None = None
 
 @njit(cache=True, nogil=True)
 def _nearest_3d(pts, queries, lo, h, gx, gy, start, items):
-    m = queries.shape[0]
-    out = np.empty(m, np.int64)
-    for i in range(m):
-        x = queries[i, 0]
-        y = queries[i, 1]
-        z = queries[i, 2]
-        cx = _index(x, lo[0], h, gx)
-        cy = _index(y, lo[1], h, gy)
-        best = np.inf
-        arg = -1
-        for r in range(max(gx, gy) + 1):
-            for yy in range(cy - r, cy + r + 1):
-                if yy < 0 or yy >= gy:
-                    continue
-                step = 1 if yy == cy - r or yy == cy + r else 2 * r
-                xx = cx - r
-                while xx <= cx + r:
-                    if 0 <= xx < gx:
-                        c = yy * gx + xx
-                        for t in range(start[c], start[c + 1]):
-                            j = items[t]
-                            dx = pts[j, 0] - x
-                            dy = pts[j, 1] - y
-                            dz = pts[j, 2] - z
-                            d = dx * dx + dy * dy + dz * dz
-                            if d < best:
-                                best = d
-                                arg = j
-                    xx += step
-            # points beyond ring r are farther than r * h in (x, y), so in 3D too
-            if arg >= 0 and best <= (r * h) * (r * h):
-                break
-        out[i] = arg
+    out = np.empty(queries.shape[0], np.int64)
+    best_d = np.empty(1)
+    best_i = np.empty(1, np.int64)
+    for i in range(queries.shape[0]):
+        _nearest(pts, queries[i], 1, lo, h, gx, gy, start, items, best_d, best_i)
+        out[i] = best_i[0]
     return out
 
 

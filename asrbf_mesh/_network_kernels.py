@@ -339,51 +339,19 @@ def _row_residual(indptr, cols, vals, z, w0, i):
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def gram_new_rows(indptr, cols, vals, z, w0, first, parts, atr_parts):
-    """Add the rows ``p >= first`` of design rows' ``A'A`` (whole) and ``A'(z - A w0)``.
-
-    The normal equations of neurons appended at columns ``first`` on, for the rows under
-    them. The rows are cut in two halves, each summed (in order) into its own
-    ``parts[h]`` (row ``p - first``) and ``atr_parts[h]`` on its own thread; the caller
-    adds the halves. The cut depends on the rows only, so the sums are the same bit for
-    bit on one thread or two. Returns the sum of ``|z - A w0|``.
-    """
-    m = indptr.shape[0] - 1
-    half = m // 2
-    sums = np.zeros(2)
-    for h in prange(2):
-        lo = 0 if h == 0 else half
-        hi = half if h == 0 else m
-        part = parts[h]
-        ap = atr_parts[h]
-        total = 0.0
-        for i in range(lo, hi):
-            a, b, r = _row_residual(indptr, cols, vals, z, w0, i)
-            total += abs(r)
-            for p in range(a, b):
-                cp = cols[p]
-                if cp < first:
-                    continue
-                vp = vals[p]
-                ap[cp] += vp * r
-                row = cp - first
-                for q in range(a, b):
-                    part[row, cols[q]] += vp * vals[q]
-        sums[h] = total
-    return sums[0] + sums[1]
-
-
-@njit(cache=True, parallel=True, nogil=True)
 def gram_new_under(pts, z, rows, centers, widths, support, lo, h, g, start, items, first,
                    parts, atr_parts):
-    """:func:`gram_new_rows` of points ``rows`` straight from the neurons, ``w0 = 0``.
+    """Add the rows ``p >= first`` of ``A'A`` (whole) and of ``A'z`` over points ``rows``.
 
-    Each point's design row (the bias, then its cell's neurons in the cell's order: the
-    entries of :func:`design_rows`, to the last bit) is made in a small buffer and summed
-    at once, so no design matrix is stored: rows under appended neurons often cover
-    most of a piece, and a stored design matrix of them takes tens of megabytes. The
-    rows are cut in two fixed halves, each summed in order on its own thread (the same
-    sums on one thread or two). Returns the sum of ``|z|`` over the rows.
+    The normal equations of neurons appended at columns ``first`` on, for the points
+    under them. Each point's design row (the bias, then its cell's neurons in the cell's
+    order: the entries of :func:`design_rows`, to the last bit) is made in a small
+    buffer and summed at once, so no design matrix is stored: rows under appended
+    neurons often cover most of a piece, and a stored design matrix of them takes tens
+    of megabytes. The rows are cut in two fixed halves, each summed in order into its
+    own ``parts[h]`` (row ``p - first``) and ``atr_parts[h]`` on its own thread; the
+    caller adds the halves. The cut depends on the rows only, so the sums are the same
+    bit for bit on one thread or two. Returns the sum of ``|z|`` over the rows.
     """
     m = rows.shape[0]
     half = m // 2
@@ -432,7 +400,7 @@ def gram_new_under(pts, z, rows, centers, widths, support, lo, h, g, start, item
 def gram_rows(indptr, cols, vals, z, w0, ata, atr):
     """Add design rows' normal equations into dense ``ata`` (upper triangle) and ``atr``.
 
-    All columns (:func:`gram_new_rows` sums those of appended neurons). Rows in CSR
+    All columns (:func:`gram_new_under` sums those of appended neurons). Rows in CSR
     form ``(indptr, cols, vals)`` (:func:`design_rows`, not full). Adds ``A'A`` into the
     upper triangle of ``ata`` (entry ``[min(p, q), max(p, q)]``) and ``A'(z - A w0)``
     into ``atr``; returns the sum of ``|z - A w0|``. Rows are added one after another in

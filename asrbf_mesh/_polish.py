@@ -110,7 +110,8 @@ class _Normal:
         self.mirrored = False
         self.atr = np.zeros(k1)
         self.abs_sum = 0.0
-        # appended columns: their rows of A'A, summed in two halves (two threads)
+        # appended columns: their rows of A'A, summed in two halves (two threads) by
+        # _normal_under's kernel
         self.parts = (np.zeros((2, k1 - first, k1)), np.zeros((2, k1))) \
             if first and self.dense is not None else None
 
@@ -118,13 +119,9 @@ class _Normal:
         indptr, cols, vals = rows
         z = np.ascontiguousarray(z, np.float64)
         if self.dense is not None:
-            assert not self.mirrored, "rows added after matrix()"
-            if self.parts is not None:
-                self.abs_sum += _nk.gram_new_rows(indptr, cols, vals, z, self.w0, self.first,
-                                                  *self.parts)
-            else:
-                self.abs_sum += _nk.gram_rows(indptr, cols, vals, z, self.w0, self.dense,
-                                              self.atr)
+            assert not self.mirrored and self.parts is None, \
+                "rows added after matrix(), or to appended columns (gram_new_under sums those)"
+            self.abs_sum += _nk.gram_rows(indptr, cols, vals, z, self.w0, self.dense, self.atr)
             return
         A = sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, self.k1))
         r = z - A @ self.w0

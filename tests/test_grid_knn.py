@@ -28,7 +28,7 @@ def test_the_grid_finds_the_k_nearest_points(name: str) -> None:
     k = min(8, len(xy))
     best_d, best_i = np.empty(k), np.empty(k, np.int64)
     for q in range(len(xy)):
-        held = _nearest.py_func(xy, q, k, *grid, best_d, best_i)
+        held = _nearest.py_func(xy, xy[q], k, *grid, best_d, best_i)
         truth = np.sort(((xy - xy[q]) ** 2).sum(axis=1))[:k]
         assert held == k
         np.testing.assert_allclose(best_d, truth, rtol=0, atol=1e-15)
@@ -47,7 +47,7 @@ def test_plane_slopes_are_least_squares_planes_through_the_nearest_samples(name)
     for m, nb in enumerate(near):
         if name == "grid":  # ties among equal distances: the grid's own neighbours
             d, i = np.empty(8), np.empty(8, np.int64)
-            _nearest.py_func(xy, at[m], 8, *point_grid(xy), d, i)
+            _nearest.py_func(xy, xy[at[m]], 8, *point_grid(xy), d, i)
             nb = i
         d, dz = xy[nb] - xy[nb].mean(axis=0), z[nb] - z[nb].mean()
         s = np.linalg.solve(d.T @ d + 1e-12 * np.eye(2), d.T @ dz) * [2.0, 0.5]  # ridged
