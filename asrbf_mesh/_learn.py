@@ -428,9 +428,9 @@ def learn_polished(hf: HeightField, cfg: FitConfig, polish: str, *, seed: int,
             f = Piece(a0, centers, widths, weights).eval_unit(hf.xy, cfg.support)[0]
             sequential = float(np.abs(hf.z - f).mean())
             centers, widths, weights = centers[strong], widths[strong], weights[strong]
-    if polish == "weights":
+    if polish == "weights":  # (the tail refinement after it starts from its residual)
         pr = polish_weights(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
-                            cfg.polish_ridge)
+                            cfg.polish_ridge, keep_residual=prune_below > 0)
     elif polish == "full":
         pr = polish_full(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
                          iterations=cfg.polish_iterations, ridge=cfg.polish_ridge)

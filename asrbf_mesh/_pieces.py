@@ -303,11 +303,15 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     normal = polished if polished is not None and isinstance(polished.ata, np.ndarray) \
         and polished.ata.shape[0] == len(widths) + 1 else None
 
-    def one_round(a0, centers, widths, weights, factor=1.0):
-        """Neurons for the worst points: (centers, widths, weights, how many added)."""
+    def one_round(a0, centers, widths, weights, factor=1.0, res=None):
+        """Neurons for the worst points: (centers, widths, weights, how many added).
+
+        ``res`` is ``z - f`` of this network when known (measured by the solve before).
+        """
         nonlocal grid, slope2, limit, normal
         piece = Piece(a0, centers, widths, weights)
-        res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
+        if res is None:
+            res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
         if grid is None:  # the first round: the piece's noise scale, once
             grid, slope2 = point_grid(sub.xy), np.full(sub.n_points, np.nan)
             sample = np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE))
@@ -340,10 +344,13 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         return grown_c, grown_w, np.r_[weights, a_new], len(picked)
 
     added = 0
+    # the polish measured its network's residual: the first round starts from it
+    res = polished.residual if polished is not None and polished.weights is weights else None
     for _ in range(TAIL_ROUNDS):
         if len(widths) == 0:
             break
-        centers, widths, weights, n = one_round(a0, centers, widths, weights)
+        centers, widths, weights, n = one_round(a0, centers, widths, weights, res=res)
+        res = None
         if n == 0:
             break
         added += n
@@ -364,7 +371,8 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             if dropped and len(pr.widths) and TAIL_ROUNDS:
                 # a last round for the points the dropped neurons left above the threshold
                 centers, widths, weights, n = one_round(pr.a0, pr.centers, pr.widths,
-                                                        pr.weights, REFILL_FACTOR)
+                                                        pr.weights, REFILL_FACTOR,
+                                                        pr.residual)
                 return (pr.a0, centers, widths, weights), added + n
             return (pr.a0, pr.centers, pr.widths, pr.weights), added
         if added == 0:

@@ -59,6 +59,10 @@ class PolishResult:
     iterations: int
     ata: np.ndarray | sp.csr_matrix | None = None
     atz: np.ndarray | None = None
+    #: ``z - f`` at the points for the returned weights, when it was measured over
+    #: points held in memory and asked for (``polish_weights(keep_residual=True)``,
+    #: :func:`solve_and_drop`): the tail refinement starts from it
+    residual: np.ndarray | None = None
 
 
 def design_matrix(xy: np.ndarray, centers: np.ndarray, widths: np.ndarray,
@@ -181,7 +185,7 @@ def _predict(xy, a0, centers, widths, weights, support) -> np.ndarray:
 
 def polish_weights(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
                    widths: np.ndarray, weights: np.ndarray, support: float,
-                   ridge: float = 1e-4) -> PolishResult:
+                   ridge: float = 1e-4, *, keep_residual: bool = False) -> PolishResult:
     """Least-squares weights (a0, a_k) with centres and widths fixed.
 
     Minimizes ``||A w - z||^2 + lam ||w - w_learned||^2`` with
@@ -199,19 +203,23 @@ def polish_weights(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray
         Truncation radius in widths.
     ridge : float
         Relative Tikhonov weight.
+    keep_residual : bool
+        Keep ``z - f`` of the polished network (its ``residual``; N floats), measured on
+        the way to its mean error.
 
     Returns
     -------
     PolishResult
     """
     return polish_weights_blocks(lambda: ((xy[sl], z[sl]) for sl in _chunks(len(z))), len(z),
-                                 a0, centers, widths, weights, support, ridge)
+                                 a0, centers, widths, weights, support, ridge,
+                                 keep_residual=keep_residual)
 
 
 def polish_weights_blocks(blocks: Callable[[], Iterable[tuple[np.ndarray, np.ndarray]]],
                           n: int, a0: float, centers: np.ndarray, widths: np.ndarray,
                           weights: np.ndarray, support: float,
-                          ridge: float = 1e-4) -> PolishResult:
+                          ridge: float = 1e-4, *, keep_residual: bool = False) -> PolishResult:
     """:func:`polish_weights` over points fed in blocks, in two passes over them.
 
     Parameters
@@ -225,8 +233,8 @@ def polish_weights_blocks(blocks: Callable[[], Iterable[tuple[np.ndarray, np.nda
         bit for bit.
     n : int
         Number of points.
-    a0, centers, widths, weights, support, ridge
-        As :func:`polish_weights`.
+    a0, centers, widths, weights, support, ridge, keep_residual
+        As :func:`polish_weights` (a kept residual takes N floats: not for streams).
     """
     w0 = np.concatenate([[a0], weights])
     # the normal equations are summed over chunks of points: memory O(K + chunk), never
@@ -245,16 +253,19 @@ def polish_weights_blocks(blocks: Callable[[], Iterable[tuple[np.ndarray, np.nda
     if not np.all(np.isfinite(w)):
         return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
     after = 0.0
+    kept = []
     grid = eval_grid(centers, widths, w[1:], support)  # (the grid packs the weights)
     for xy_b, z_b in blocks():
         for sl in _chunks(len(z_b)):
-            after += float(np.abs(eval_unit(grid, xy_b[sl], w[0], centers, widths,
-                                            w[1:])[0] - z_b[sl]).sum())
+            r = z_b[sl] - eval_unit(grid, xy_b[sl], w[0], centers, widths, w[1:])[0]
+            after += float(np.abs(r).sum())
+            if keep_residual:
+                kept.append(r)
     after /= n
     if after > before:
         return PolishResult(a0, centers, widths, weights, before, before, 0, ata, atz)
     return PolishResult(float(w[0]), centers, widths, w[1:].copy(), before, after, 1, ata,
-                        atz)
+                        atz, np.concatenate(kept) if keep_residual else None)
 
 
 def extend_normal(xy: np.ndarray, z: np.ndarray, pr: PolishResult, centers: np.ndarray,
@@ -502,9 +513,9 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     neurons were appended), the removals together raise the sum by at most
     ``give_back`` times what the solved weights gained over ``base``: the result's sum
     of squared errors stays below the reference's when ``give_back < 1``.
-    Returns ``(result, neurons dropped)``, the result's ``ebar_after`` measured (and its
-    ``ebar_before`` NaN), or None above :data:`IDLE_MAX_NEURONS` neurons or when ``M``
-    is not positive definite.
+    Returns ``(result, neurons dropped)``, the result's ``ebar_after`` and ``residual``
+    measured (and its ``ebar_before`` NaN), or None above :data:`IDLE_MAX_NEURONS`
+    neurons or when ``M`` is not positive definite.
     """
     import scipy.linalg as sla
 
@@ -537,9 +548,10 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     keep = np.setdiff1d(np.arange(k), dropped - 1)
     cols = np.concatenate([[0], 1 + keep])
     centers, widths, weights = centers[keep], widths[keep], w[1 + keep]
-    after = float(np.abs(z - _predict(xy, w[0], centers, widths, weights, support)).mean())
-    return PolishResult(float(w[0]), centers, widths, weights.copy(), float("nan"), after, 1,
-                        ata[np.ix_(cols, cols)], atz[cols]), len(dropped)
+    res = z - _predict(xy, w[0], centers, widths, weights, support)
+    return PolishResult(float(w[0]), centers, widths, weights.copy(), float("nan"),
+                        float(np.abs(res).mean()), 1, ata[np.ix_(cols, cols)], atz[cols],
+                        res), len(dropped)
 
 
 def _sum_squares(ata: np.ndarray, atz: np.ndarray, w: np.ndarray) -> float:

@@ -319,6 +319,25 @@ def test_appended_weights_are_the_local_least_squares_weights(learned) -> None:
     assert np.abs(got).max() > 1e-3
 
 
+def test_a_kept_residual_is_the_polished_networks_own(learned) -> None:
+    # the tail refinement starts from it instead of evaluating the network again
+    from asrbf_mesh._piece import Piece
+    from asrbf_mesh._polish import extend_normal, solve_and_drop
+
+    hf, st, first, weights = _appended(learned, 8)
+    assert first.residual is None  # not asked for: no N floats kept
+    pr = polish_weights(hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5,
+                        keep_residual=True)
+    f = Piece(pr.a0, pr.centers, pr.widths, pr.weights).eval_unit(hf.xy, 3.5)[0]
+    assert pr.residual.tobytes() == (hf.z - f).tobytes()
+    assert pr.ebar_after == float(np.abs(pr.residual).mean())
+    ata, atz = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    got, _ = solve_and_drop(hf.xy, hf.z, ata, atz, first.a0, st.centers, st.widths,
+                            weights, 3.5, 1e-4, 1e-6)
+    f = Piece(got.a0, got.centers, got.widths, got.weights).eval_unit(hf.xy, 3.5)[0]
+    assert got.residual.tobytes() == (hf.z - f).tobytes()
+
+
 def test_eliminate_is_greedy_backward_elimination_by_brute_force() -> None:
     # each step removes the unknown whose removal raises the objective least, exactly
     import scipy.linalg as sla
