@@ -196,7 +196,7 @@ def ratio_main(seeds: list[int], reps: int) -> int:
                      median_worst([best["cut"][s] for s in seeds], ".3f"),
                      median_worst([best["no tails"][s] for s in seeds], ".3f")])
     seeds_s = ", ".join(map(str, seeds))
-    body = (f"## Piecewise fit time against the single fit (issue 14): seeds {seeds_s}\n\n"
+    body = ("## Piecewise fit time against the single fit (issue 14)\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --ratio {reps} --seeds {' '.join(map(str, seeds))}`"
             f" ({time.perf_counter() - t0:.0f} s)._\n\n"
@@ -207,7 +207,7 @@ def ratio_main(seeds: list[int], reps: int) -> int:
             "skips the cut that otherwise runs beside the frame; *no tails*: no tail "
             "refinement (`_pieces.TAIL_ROUNDS = 0`). The piecewise model's extra time over "
             "the single network is the gap between its column and these. Cells: median over "
-            "the seeds (worst seed).\n\n"
+            f"the seeds {seeds_s} (worst seed).\n\n"
             + table(["scan", "single s", "pieces s", "pieces / single", "per seed",
                      "pieces, cut given s", "pieces, no tails s"], rows))
     print(body)
