@@ -80,8 +80,6 @@ def compile_after_learning() -> None:
     from ._frame import to_height_field
     from ._mesh import Mesh
     from ._network import Network
-    from ._outliers import isolated_points
-    from ._piece_map import PieceMap
     from ._pieces import refine_tails
     from ._polish import polish_weights
     from ._segment import segment
@@ -109,13 +107,12 @@ def compile_after_learning() -> None:
     net.evaluate(rng.random((100, 2)), unit=True)  # the serial one
     net.gradient(rng.random((100, 2)), unit=True)
     reconstruct(net, footprint=Mesh(pts, faces))
-    # last what the command compiles before learning anyway (for the other commands): the
-    # cut into pieces, of a ramp winding once around a point (a cliff along one ray: jump
-    # pairs, then the geodesic split) with one point in no triangle (its nearest anchor)
-    isolated_points(pts)
+    # last what the command compiles before learning anyway (for the demo, which learns
+    # first): the cut into pieces, of a ramp winding once around a point (a cliff along
+    # one ray: jump pairs, then the geodesic split) with one point in no triangle (its
+    # nearest anchor)
     ramp = 10.0 * (np.arctan2(y - 20.3, x - 19.7) % (2 * np.pi)) / (2 * np.pi)
-    seg = segment(Mesh(np.r_[np.c_[x, y, ramp], [[20.5, 20.5, 0.0]]], faces))
-    PieceMap.of_points(hf.xy, seg.labels[:-1], hf.spacing)
+    segment(Mesh(np.r_[np.c_[x, y, ramp], [[20.5, 20.5, 0.0]]], faces))
 
 
 if __name__ == "__main__":  # pragma: no cover - the helper process
