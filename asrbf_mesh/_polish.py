@@ -167,11 +167,9 @@ def _normal_under(xy: np.ndarray, z: np.ndarray, rows: np.ndarray, centers: np.n
     grid = eval_grid(centers, widths, weights, support)
     normal = _Normal(len(widths) + 1, np.zeros(len(widths) + 1), first=first)  # A'z
     if normal.parts is not None:  # appended columns, dense: no design rows stored
-        s, lo, h, g, start, items = grid[:6]
         normal.abs_sum = _nk.gram_new_under(
             np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(z, np.float64),
-            np.ascontiguousarray(rows, np.int64), _read_only(centers), _read_only(widths),
-            s, lo, h, g, start, items, first, *normal.parts)
+            np.ascontiguousarray(rows, np.int64), *grid, first, *normal.parts)
         return normal
     for sl in _chunks(len(rows)):
         normal.add(_design_rows(grid, xy[rows[sl]], centers, widths, weights), z[rows[sl]])

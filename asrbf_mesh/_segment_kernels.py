@@ -176,12 +176,16 @@ def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> n
 
 @njit(cache=True, nogil=True)
 def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump):
-    # two sweeps over the same pairs: the first counts, the second fills (one kernel to
-    # compile, no growing list)
+    # two sweeps: the first counts the pairs and marks the points that have some, the
+    # second fills them from the marked points only (jumps are rare: one kernel to
+    # compile, no growing list, and the second sweep costs almost nothing)
     out = np.empty((0, 2), dtype=np.int64)
+    some = np.zeros(pts.shape[0], dtype=np.bool_)
     for sweep in range(2):
         n = 0
         for i in range(pts.shape[0]):
+            if sweep == 1 and not some[i]:
+                continue
             ci, cj = ij[i, 0], ij[i, 1]
             for dj in range(-1, 2):
                 y = cj + dj
@@ -206,6 +210,8 @@ def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump):
                             if sweep == 1:
                                 out[n, 0] = i
                                 out[n, 1] = k
+                            else:
+                                some[i] = True
                             n += 1
         if sweep == 0:
             out = np.empty((n, 2), dtype=np.int64)
