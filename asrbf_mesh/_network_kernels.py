@@ -368,7 +368,7 @@ def _add_scaled(out, row, v, ee, n):
 
 @njit(cache=True, nogil=True)
 def _rows_by_cell(pts, rows, lo, h, g):
-    """The rows sorted by grid cell (stable counting sort) and each cell's run ``count``."""
+    """Return the rows sorted by grid cell (stable counting sort) and each cell's run ``count``."""
     m = rows.shape[0]
     ncell = g * g
     cell = np.empty(m, np.int64)
