@@ -197,8 +197,11 @@ class _State:
 
     def run(self, X: np.ndarray, Z: np.ndarray, order: np.ndarray, t_end: int) -> None:
         pos = 0
+        # the kernel compiled for this updater, pruning rule and decay only
+        kernel = _lk.run_steps_for(self.ci[_lk.CI_UPDATE], self.ci[_lk.CI_PRUNE],
+                                   self.ci[_lk.CI_DECAY])
         while True:
-            status, pos = _lk.run_steps(
+            status, pos = kernel(
                 X, Z, order, t_end, self.cf, self.ci, self.fs, self.st, self.W, self.P,
                 self.alive, self.gen, self.free, self.last_active, self.miss, self.hk, self.hs,
                 self.hg, self.c_head, self.c_nxt, self.c_prv, self.c_cell, self.l_head,

@@ -113,7 +113,7 @@ def _cell_of(x, lo, h, g):
 # --- linked lists -------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _link(head, nxt, prv, cell_of, s, c):
     first = head[c]
     nxt[s] = first
@@ -124,7 +124,7 @@ def _link(head, nxt, prv, cell_of, s, c):
     cell_of[s] = c
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _unlink(head, nxt, prv, cell_of, s):
     c = cell_of[s]
     p = prv[s]
@@ -138,7 +138,7 @@ def _unlink(head, nxt, prv, cell_of, s):
     cell_of[s] = -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _centre_cell(ux, uy, cf, ci):
     gc = ci[CI_GC]
     lo = cf[CF_BOXLO]
@@ -146,7 +146,7 @@ def _centre_cell(ux, uy, cf, ci):
     return _cell_of(uy, lo, h, gc) * gc + _cell_of(ux, lo, h, gc)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _level_cell(ux, uy, sigma, cf, ci, lev_off):
     """Global cell index of a neuron in the support pyramid, and its level."""
     s = cf[CF_SUPPORT] * sigma
@@ -179,7 +179,7 @@ def _unindex_neuron(s, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l_prv, l_cel
     lev_count[l_lev[s]] -= 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l_prv, l_cell,
                     l_lev, lev_off, lev_count):
     """Move a neuron whose centre or width changed to its new cells (if they changed)."""
@@ -199,7 +199,7 @@ def _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l
 # --- queries ------------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count, out_idx, out_phi,
                    out_d2, out_pi):
     """Evaluate the network at (x, y): f without a0, sum |Pi_k|, and the support list.
@@ -256,7 +256,7 @@ def _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off, lev_count, out_idx, 
     return f, sabs, m, bk, best
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _nearest(x, y, W, cf, ci, c_head, c_nxt):
     """Exact nearest alive centre by ring search; returns (slot, distance) or (-1, inf)."""
     gc = ci[CI_GC]
@@ -292,7 +292,7 @@ def _nearest(x, y, W, cf, ci, c_head, c_nxt):
     return bk, np.sqrt(best)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _within(x, y, radius, W, cf, ci, c_head, c_nxt, out_idx, out_d2):
     """All alive centres within ``radius`` of (x, y); returns their count."""
     gc = ci[CI_GC]
@@ -346,7 +346,7 @@ def _reset_block(P, s, sig, p0):
     P[s, 3, 3] = p0 * sig * sig
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _apply_step(W, s, dw, cf):
     """Apply a parameter step in (a, log sigma, ux, uy) with the width and box guards."""
     W[s, 0] += dw[0]
@@ -361,7 +361,7 @@ def _apply_step(W, s, dw, cf):
     W[s, 3] = min(max(W[s, 3] + dw[3], cf[CF_BOXLO]), cf[CF_BOXHI])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _block_finite(W, P, s):
     for i in range(4):
         if not np.isfinite(W[s, i]):
@@ -372,7 +372,7 @@ def _block_finite(W, P, s):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _block_healthy(P, s, limit):
     """Diagonal positive and bounded (covariance of a well-behaved neuron)."""
     for i in range(4):
@@ -406,347 +406,373 @@ def _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt
 # --- the learning loop --------------------------------------------------------------------
 
 
-@njit(cache=True, nogil=True)
-def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_active, miss,
-              hk, hs, hg, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l_prv, l_cell, l_lev,
-              lev_off, lev_count, wbuf, Pg, log_t, log_k, log_rms, log_sig, log_amp, start):
-    """Run Algorithm 1 on observations ``order[start:]`` until ``st[ST_T] == t_end``.
+def _make_run_steps(update: int, prune_mode: int, decay: int):
+    """Compile-on-demand :func:`run_steps` for one updater, pruning rule and decay.
 
-    Parameters are the state arrays owned by ``asrbf_mesh._learn._State``. Returns
-    ``(status, position)``: ``DONE`` when the chunk is consumed, ``NEED_SLOTS`` when
-    every slot is used and the next step may add a neuron (grow ``W`` etc. and call
-    again from ``position``: the step has not started), ``NEED_LOG`` when the log arrays
-    are full.
+    The three choices are constants of the closure, so numba prunes the branches of the
+    others before it compiles: a command compiles only the path it runs (the default
+    path compiles in about 5 s where all of them took 8 s), and each variant is cached on
+    its own (numba keys a closure's cache entry by its constants).
     """
-    cap = W.shape[0]
-    nparam_full = Pg.shape[0] if ci[CI_UPDATE] == UPDATE_GEKF else 0
-    sup_idx = np.empty(cap, np.int64)
-    sup_phi = np.empty(cap)
-    sup_d2 = np.empty(cap)
-    sup_pi = np.empty(cap)
-    nb_idx = np.empty(cap, np.int64)
-    nb_d2 = np.empty(cap)
-    nb_phi = np.empty(cap)
-    g = np.empty(4)
-    pb = np.empty(4)
-    dw = np.empty(4)
-    gk_idx = np.empty(cap, np.int64)  # GEKF: alive slots
-    gb = np.empty(nparam_full if nparam_full > 0 else 1)
-    gpb = np.empty(nparam_full if nparam_full > 0 else 1)
 
-    E = cf[CF_E]
-    EW = cf[CF_EW]
-    R = cf[CF_R]
-    q = cf[CF_Q]
-    p0 = cf[CF_P0]
-    window = ci[CI_WINDOW]
-    pwin = ci[CI_PWIN]
-    prune_mode = ci[CI_PRUNE]
-    update = ci[CI_UPDATE]
-    stride = ci[CI_LOGSTRIDE]
-    cov_limit = 1e6 * p0
-    near_safe = (0.999 / ci[CI_G0]) ** 2  # below the finest support cell, squared
+    @njit(cache=True, nogil=True)
+    def run_steps(X, Z, order, t_end, cf, ci, fs, st, W, P, alive, gen, free, last_active, miss,
+                  hk, hs, hg, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l_prv, l_cell, l_lev,
+                  lev_off, lev_count, wbuf, Pg, log_t, log_k, log_rms, log_sig, log_amp, start):
+        """Run Algorithm 1 on observations ``order[start:]`` until ``st[ST_T] == t_end``.
 
-    pos = start
-    n_order = order.shape[0]
-    at_floor, D = False, cf[CF_DMAX]  # separation D of eq. (4), once at D_min no more pow
-    while pos < n_order and st[ST_T] < t_end:
-        t = st[ST_T]
-        # a step that may add a neuron needs a free slot: ask for more slots before the
-        # step changes anything (its residual in the RMS window, a log row), so that the
-        # step, run again after the slots grew, counts its observation once
-        if st[ST_NFREE] == 0 and st[ST_SLOTS] >= cap and st[ST_K] < ci[CI_MAXK]:
-            return NEED_SLOTS, pos
-        if stride > 0 and t % stride == 0:
-            nl = st[ST_NLOG]
-            if nl >= log_t.shape[0]:
-                return NEED_LOG, pos
-            ssum = 0.0
-            asum = 0.0
-            for s in range(st[ST_SLOTS]):
-                if alive[s]:
-                    ssum += W[s, 1]
-                    asum += abs(W[s, 0])
-            k = st[ST_K]
-            log_t[nl] = t
-            log_k[nl] = k
-            log_rms[nl] = np.sqrt(fs[FS_WSUM] / max(st[ST_WCOUNT], 1))
-            log_sig[nl] = ssum / k if k > 0 else 0.0  # no neuron yet: 0, never NaN
-            log_amp[nl] = asum / k if k > 0 else 0.0
-            st[ST_NLOG] = nl + 1
+        Parameters are the state arrays owned by ``asrbf_mesh._learn._State``. Returns
+        ``(status, position)``: ``DONE`` when the chunk is consumed, ``NEED_SLOTS`` when
+        every slot is used and the next step may add a neuron (grow ``W`` etc. and call
+        again from ``position``: the step has not started), ``NEED_LOG`` when the log arrays
+        are full.
+        """
+        cap = W.shape[0]
+        nparam_full = Pg.shape[0] if update == UPDATE_GEKF else 0
+        sup_idx = np.empty(cap, np.int64)
+        sup_phi = np.empty(cap)
+        sup_d2 = np.empty(cap)
+        sup_pi = np.empty(cap)
+        nb_idx = np.empty(cap, np.int64)
+        nb_d2 = np.empty(cap)
+        nb_phi = np.empty(cap)
+        g = np.empty(4)
+        pb = np.empty(4)
+        dw = np.empty(4)
+        gk_idx = np.empty(cap, np.int64)  # GEKF: alive slots
+        gb = np.empty(nparam_full if nparam_full > 0 else 1)
+        gpb = np.empty(nparam_full if nparam_full > 0 else 1)
 
-        i = order[pos]
-        x = X[i, 0]
-        y = X[i, 1]
-        z = Z[i]
+        E = cf[CF_E]
+        EW = cf[CF_EW]
+        R = cf[CF_R]
+        q = cf[CF_Q]
+        p0 = cf[CF_P0]
+        window = ci[CI_WINDOW]
+        pwin = ci[CI_PWIN]
+        stride = ci[CI_LOGSTRIDE]
+        cov_limit = 1e6 * p0
+        near_safe = (0.999 / ci[CI_G0]) ** 2  # below the finest support cell, squared
 
-        # Stage 1: network output, residual (r = z - f: docs/design.md), windowed RMS.
-        # sup_pi: |Pi_k| of this observation's output, before the update (pruning)
-        fk, sabs, m, near, near_d2 = _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off,
-                                                    lev_count, sup_idx, sup_phi, sup_d2,
-                                                    sup_pi)
-        r = z - (fs[FS_A0] + fk)
-        wp = st[ST_WPOS]
-        if st[ST_WCOUNT] == window:
-            fs[FS_WSUM] -= wbuf[wp]
-        else:
-            st[ST_WCOUNT] += 1
-        wbuf[wp] = r * r
-        fs[FS_WSUM] += r * r
-        st[ST_WPOS] = (wp + 1) % window
-        if wp == window - 1:  # refresh the running sum once per window: no drift
-            acc = 0.0
-            for j in range(st[ST_WCOUNT]):
-                acc += wbuf[j]
-            fs[FS_WSUM] = acc
-        rms = np.sqrt(max(fs[FS_WSUM], 0.0) / st[ST_WCOUNT])
+        pos = start
+        n_order = order.shape[0]
+        at_floor, D = False, cf[CF_DMAX]  # separation D of eq. (4), once at D_min no more pow
+        while pos < n_order and st[ST_T] < t_end:
+            t = st[ST_T]
+            # a step that may add a neuron needs a free slot: ask for more slots before the
+            # step changes anything (its residual in the RMS window, a log row), so that the
+            # step, run again after the slots grew, counts its observation once
+            if st[ST_NFREE] == 0 and st[ST_SLOTS] >= cap and st[ST_K] < ci[CI_MAXK]:
+                return NEED_SLOTS, pos
+            if stride > 0 and t % stride == 0:
+                nl = st[ST_NLOG]
+                if nl >= log_t.shape[0]:
+                    return NEED_LOG, pos
+                ssum = 0.0
+                asum = 0.0
+                for s in range(st[ST_SLOTS]):
+                    if alive[s]:
+                        ssum += W[s, 1]
+                        asum += abs(W[s, 0])
+                k = st[ST_K]
+                log_t[nl] = t
+                log_k[nl] = k
+                log_rms[nl] = np.sqrt(fs[FS_WSUM] / max(st[ST_WCOUNT], 1))
+                log_sig[nl] = ssum / k if k > 0 else 0.0  # no neuron yet: 0, never NaN
+                log_amp[nl] = asum / k if k > 0 else 0.0
+                st[ST_NLOG] = nl + 1
 
-        if ci[CI_DECAY] == DECAY_OBSERVATION:
-            if not at_floor:
-                D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** t, cf[CF_DMIN])
-                at_floor = D == cf[CF_DMIN]
-        else:
-            D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** st[ST_K], cf[CF_DMIN])
+            i = order[pos]
+            x = X[i, 0]
+            y = X[i, 1]
+            z = Z[i]
 
-        # the support query saw every centre within the finest level's cell of x: a centre
-        # it saw closer than that is the nearest of all (the ring search only otherwise)
-        if near >= 0 and near_d2 < near_safe:
-            dist = np.sqrt(near_d2)
-        else:
-            near, dist = _nearest(x, y, W, cf, ci, c_head, c_nxt)
-        grow = dist > D and abs(r) > E and rms > EW
-        if grow and st[ST_K] >= ci[CI_MAXK]:
-            st[ST_CAPPED] += 1
-            grow = False
-        if grow:
-            if st[ST_NFREE] > 0:
-                st[ST_NFREE] -= 1
-                s = free[st[ST_NFREE]]
-            else:  # a free slot exists: checked at the start of the step
-                s = st[ST_SLOTS]
-                st[ST_SLOTS] += 1
-            sig = cf[CF_PSI] * (dist if near >= 0 else D)
-            sig = min(max(sig, cf[CF_SMIN]), cf[CF_SMAX])
-            W[s, 0] = r
-            W[s, 1] = sig
-            W[s, 2] = x
-            W[s, 3] = y
-            _reset_block(P, s, sig, p0)
-            alive[s] = 1
-            gen[s] += 1
-            last_active[s] = t
-            miss[s] = 0
-            _index_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l_prv,
-                          l_cell, l_lev, lev_off, lev_count)
-            if prune_mode == PRUNE_LITERAL:
-                st[ST_HEAP] = _heap_push_checked(hk, hs, hg, st[ST_HEAP], t + pwin, s, gen[s],
-                                                 alive, gen)
-            if nparam_full > 0:
-                b = 1 + 4 * s
-                for a_ in range(4):
-                    for j in range(nparam_full):
-                        Pg[b + a_, j] = 0.0
-                        Pg[j, b + a_] = 0.0
-                Pg[b, b] = p0
-                Pg[b + 1, b + 1] = p0
-                Pg[b + 2, b + 2] = p0 * sig * sig
-                Pg[b + 3, b + 3] = p0 * sig * sig
-            st[ST_K] += 1
-            st[ST_ADDED] += 1
-        elif update == UPDATE_NEKF or update == UPDATE_NEKF_NB:
-            # Stage 2: NEKF on the nearest neuron (K' = 1) or the neighbourhood, plus a0.
-            if update == UPDATE_NEKF:
-                nsel = 0
-                if near >= 0:
-                    nb_idx[0] = near
-                    nsel = 1
+            # Stage 1: network output, residual (r = z - f: docs/design.md), windowed RMS.
+            # sup_pi: |Pi_k| of this observation's output, before the update (pruning)
+            fk, sabs, m, near, near_d2 = _support_query(x, y, W, cf, ci, l_head, l_nxt, lev_off,
+                                                        lev_count, sup_idx, sup_phi, sup_d2,
+                                                        sup_pi)
+            r = z - (fs[FS_A0] + fk)
+            wp = st[ST_WPOS]
+            if st[ST_WCOUNT] == window:
+                fs[FS_WSUM] -= wbuf[wp]
             else:
-                nsel = _within(x, y, cf[CF_NBR] * D, W, cf, ci, c_head, c_nxt, nb_idx, nb_d2)
-                if nsel > ci[CI_MAXNB]:  # keep the closest (partial selection sort)
-                    for a_ in range(ci[CI_MAXNB]):
-                        best = a_
-                        for b_ in range(a_ + 1, nsel):
-                            if nb_d2[b_] < nb_d2[best] or (
-                                    nb_d2[b_] == nb_d2[best] and nb_idx[b_] < nb_idx[best]):
-                                best = b_
-                        nb_idx[a_], nb_idx[best] = nb_idx[best], nb_idx[a_]
-                        nb_d2[a_], nb_d2[best] = nb_d2[best], nb_d2[a_]
-                    nsel = ci[CI_MAXNB]
-                if nsel == 0 and near >= 0:
-                    nb_idx[0] = near
-                    nsel = 1
-            # innovation variance S = R + B' P B over the selected blocks
-            S = R + fs[FS_P00]
-            for j in range(nsel):
-                s = nb_idx[j]
-                phi = 0.0
-                d2 = 0.0
-                for u in range(m):
-                    if sup_idx[u] == s:
-                        phi = sup_phi[u]
-                        d2 = sup_d2[u]
-                        break
-                sup_phi_sel = phi  # zero outside the truncated support
-                if sup_phi_sel == 0.0:
-                    nb_d2[j] = -1.0  # mark: no gradient
-                    continue
-                nb_d2[j] = d2
-                nb_phi[j] = phi
-                _grad(W, s, x, y, phi, d2, g)
-                for a_ in range(4):
-                    acc = 0.0
-                    for b_ in range(4):
-                        acc += P[s, a_, b_] * g[b_]
-                    S += g[a_] * acc
-            for j in range(nsel):
-                s = nb_idx[j]
-                d2 = nb_d2[j]
-                if d2 < 0.0:
-                    continue
-                phi = nb_phi[j]  # W[s] is unchanged since the support query
-                _grad(W, s, x, y, phi, d2, g)
-                for a_ in range(4):
-                    acc = 0.0
-                    for b_ in range(4):
-                        acc += P[s, a_, b_] * g[b_]
-                    pb[a_] = acc
-                for a_ in range(4):
-                    dw[a_] = pb[a_] * r / S
-                _apply_step(W, s, dw, cf)
-                sig = W[s, 1]
-                for a_ in range(4):
-                    for b_ in range(a_, 4):
-                        v = P[s, a_, b_] - pb[a_] * pb[b_] / S
-                        P[s, a_, b_] = v
-                        P[s, b_, a_] = v
-                P[s, 0, 0] += q * p0
-                P[s, 1, 1] += q * p0
-                P[s, 2, 2] += q * p0 * sig * sig
-                P[s, 3, 3] += q * p0 * sig * sig
-                if not _block_finite(W, P, s):
-                    st[ST_DIVERGED] += 1
-                    _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head,
-                            l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
-                    continue
-                if not _block_healthy(P, s, cov_limit):
-                    st[ST_RESET] += 1
-                    _reset_block(P, s, sig, p0)
-                _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt,
-                                l_prv, l_cell, l_lev, lev_off, lev_count)
-            p00 = fs[FS_P00]
-            fs[FS_A0] += p00 * r / S
-            fs[FS_P00] = p00 - p00 * p00 / S + q * p0
-        elif update == UPDATE_GD:
-            rate = cf[CF_GD]
-            for u in range(m):
-                s = sup_idx[u]
-                if alive[s] == 0:
-                    continue
-                _grad(W, s, x, y, sup_phi[u], sup_d2[u], g)
-                sig = W[s, 1]
-                dw[0] = rate * g[0] * r
-                dw[1] = rate * g[1] * r
-                dw[2] = rate * sig * sig * g[2] * r
-                dw[3] = rate * sig * sig * g[3] * r
-                _apply_step(W, s, dw, cf)
-                _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt,
-                                l_prv, l_cell, l_lev, lev_off, lev_count)
-            fs[FS_A0] += rate * r
-        else:
-            # GEKF: one covariance over a0 and every alive neuron.
-            na = 0
-            for s in range(st[ST_SLOTS]):
-                if alive[s]:
-                    gk_idx[na] = s
-                    na += 1
-            for j in range(nparam_full):
-                gb[j] = 0.0
-            gb[0] = 1.0
-            for u in range(m):
-                s = sup_idx[u]
-                _grad(W, s, x, y, sup_phi[u], sup_d2[u], g)
-                for a_ in range(4):
-                    gb[1 + 4 * s + a_] = g[a_]
-            # pb = P b, restricted to live rows (dead rows are zero)
-            S = R
-            for jj in range(na + 1):
-                for a_ in range(1 if jj == 0 else 4):
-                    row = 0 if jj == 0 else 1 + 4 * gk_idx[jj - 1] + a_
-                    acc = Pg[row, 0] * gb[0]
-                    for u in range(m):
-                        cb = 1 + 4 * sup_idx[u]
-                        for b_ in range(4):
-                            acc += Pg[row, cb + b_] * gb[cb + b_]
-                    gpb[row] = acc
-                    S += gb[row] * acc
-            fs[FS_A0] += gpb[0] * r / S
-            for jj in range(na + 1):
-                for a_ in range(1 if jj == 0 else 4):
-                    row = 0 if jj == 0 else 1 + 4 * gk_idx[jj - 1] + a_
-                    for kk in range(na + 1):
-                        for b_ in range(1 if kk == 0 else 4):
-                            col = 0 if kk == 0 else 1 + 4 * gk_idx[kk - 1] + b_
-                            Pg[row, col] -= gpb[row] * gpb[col] / S
-            Pg[0, 0] += q * p0
-            for jj in range(na):
-                s = gk_idx[jj]
-                b = 1 + 4 * s
-                for a_ in range(4):
-                    dw[a_] = gpb[b + a_] * r / S
-                _apply_step(W, s, dw, cf)
-                sig = W[s, 1]
-                Pg[b, b] += q * p0
-                Pg[b + 1, b + 1] += q * p0
-                Pg[b + 2, b + 2] += q * p0 * sig * sig
-                Pg[b + 3, b + 3] += q * p0 * sig * sig
-                ok = True
-                for a_ in range(4):
-                    if not np.isfinite(W[s, a_]) or not (Pg[b + a_, b + a_] > 0.0):
-                        ok = False
-                if not ok:
-                    st[ST_DIVERGED] += 1
-                    _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head,
-                            l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
-                    continue
-                _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt,
-                                l_prv, l_cell, l_lev, lev_off, lev_count)
+                st[ST_WCOUNT] += 1
+            wbuf[wp] = r * r
+            fs[FS_WSUM] += r * r
+            st[ST_WPOS] = (wp + 1) % window
+            if wp == window - 1:  # refresh the running sum once per window: no drift
+                acc = 0.0
+                for j in range(st[ST_WCOUNT]):
+                    acc += wbuf[j]
+                fs[FS_WSUM] = acc
+            rms = np.sqrt(max(fs[FS_WSUM], 0.0) / st[ST_WCOUNT])
 
-        # Stage 3: pruning by contribution ratio r_k = |Pi_k| / sum |Pi_j| (eqs. 11-13),
-        # both of the output of Stage 1 (before the update: numerator and denominator of
-        # the same network)
-        if prune_mode == PRUNE_LITERAL:
-            thr = cf[CF_PRUNE] * sabs
-            for u in range(m):
-                s = sup_idx[u]
-                if alive[s] and sup_pi[u] >= thr:
-                    last_active[s] = t
-            while st[ST_HEAP] > 0 and hk[0] <= t:
-                s = hs[0]
-                gg = hg[0]
-                st[ST_HEAP] = _heap_pop(hk, hs, hg, st[ST_HEAP])
-                if alive[s] == 0 or gen[s] != gg:
-                    continue
-                due = last_active[s] + pwin
-                if due > t:
-                    st[ST_HEAP] = _heap_push_checked(hk, hs, hg, st[ST_HEAP], due, s, gg,
+            if decay == DECAY_OBSERVATION:
+                if not at_floor:
+                    D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** t, cf[CF_DMIN])
+                    at_floor = D == cf[CF_DMIN]
+            else:
+                D = max(cf[CF_DMAX] * cf[CF_GAMMA] ** st[ST_K], cf[CF_DMIN])
+
+            # the support query saw every centre within the finest level's cell of x: a centre
+            # it saw closer than that is the nearest of all (the ring search only otherwise)
+            if near >= 0 and near_d2 < near_safe:
+                dist = np.sqrt(near_d2)
+            else:
+                near, dist = _nearest(x, y, W, cf, ci, c_head, c_nxt)
+            grow = dist > D and abs(r) > E and rms > EW
+            if grow and st[ST_K] >= ci[CI_MAXK]:
+                st[ST_CAPPED] += 1
+                grow = False
+            if grow:
+                if st[ST_NFREE] > 0:
+                    st[ST_NFREE] -= 1
+                    s = free[st[ST_NFREE]]
+                else:  # a free slot exists: checked at the start of the step
+                    s = st[ST_SLOTS]
+                    st[ST_SLOTS] += 1
+                sig = cf[CF_PSI] * (dist if near >= 0 else D)
+                sig = min(max(sig, cf[CF_SMIN]), cf[CF_SMAX])
+                W[s, 0] = r
+                W[s, 1] = sig
+                W[s, 2] = x
+                W[s, 3] = y
+                _reset_block(P, s, sig, p0)
+                alive[s] = 1
+                gen[s] += 1
+                last_active[s] = t
+                miss[s] = 0
+                _index_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt, l_prv,
+                              l_cell, l_lev, lev_off, lev_count)
+                if prune_mode == PRUNE_LITERAL:
+                    st[ST_HEAP] = _heap_push_checked(hk, hs, hg, st[ST_HEAP], t + pwin, s, gen[s],
                                                      alive, gen)
+                if nparam_full > 0:
+                    b = 1 + 4 * s
+                    for a_ in range(4):
+                        for j in range(nparam_full):
+                            Pg[b + a_, j] = 0.0
+                            Pg[j, b + a_] = 0.0
+                    Pg[b, b] = p0
+                    Pg[b + 1, b + 1] = p0
+                    Pg[b + 2, b + 2] = p0 * sig * sig
+                    Pg[b + 3, b + 3] = p0 * sig * sig
+                st[ST_K] += 1
+                st[ST_ADDED] += 1
+            elif update == UPDATE_NEKF or update == UPDATE_NEKF_NB:
+                # Stage 2: NEKF on the nearest neuron (K' = 1) or the neighbourhood, plus a0.
+                if update == UPDATE_NEKF:
+                    nsel = 0
+                    if near >= 0:
+                        nb_idx[0] = near
+                        nsel = 1
                 else:
-                    st[ST_PRUNED] += 1
-                    _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head,
-                            l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
-        elif prune_mode == PRUNE_SUPPORT:
-            thr = cf[CF_PRUNE] * sabs
-            for u in range(m):
-                s = sup_idx[u]
-                ms = (miss[s] + 1) * (sup_pi[u] < thr)  # no branch; reset on slot reuse
-                miss[s] = ms
-                if ms >= pwin and alive[s] != 0:
-                    st[ST_PRUNED] += 1
-                    _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell,
-                            l_head, l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
-        st[ST_T] = t + 1
-        pos += 1
-    return DONE, pos
+                    nsel = _within(x, y, cf[CF_NBR] * D, W, cf, ci, c_head, c_nxt, nb_idx, nb_d2)
+                    if nsel > ci[CI_MAXNB]:  # keep the closest (partial selection sort)
+                        for a_ in range(ci[CI_MAXNB]):
+                            best = a_
+                            for b_ in range(a_ + 1, nsel):
+                                if nb_d2[b_] < nb_d2[best] or (
+                                        nb_d2[b_] == nb_d2[best] and nb_idx[b_] < nb_idx[best]):
+                                    best = b_
+                            nb_idx[a_], nb_idx[best] = nb_idx[best], nb_idx[a_]
+                            nb_d2[a_], nb_d2[best] = nb_d2[best], nb_d2[a_]
+                        nsel = ci[CI_MAXNB]
+                    if nsel == 0 and near >= 0:
+                        nb_idx[0] = near
+                        nsel = 1
+                # innovation variance S = R + B' P B over the selected blocks
+                S = R + fs[FS_P00]
+                for j in range(nsel):
+                    s = nb_idx[j]
+                    phi = 0.0
+                    d2 = 0.0
+                    for u in range(m):
+                        if sup_idx[u] == s:
+                            phi = sup_phi[u]
+                            d2 = sup_d2[u]
+                            break
+                    sup_phi_sel = phi  # zero outside the truncated support
+                    if sup_phi_sel == 0.0:
+                        nb_d2[j] = -1.0  # mark: no gradient
+                        continue
+                    nb_d2[j] = d2
+                    nb_phi[j] = phi
+                    _grad(W, s, x, y, phi, d2, g)
+                    for a_ in range(4):
+                        acc = 0.0
+                        for b_ in range(4):
+                            acc += P[s, a_, b_] * g[b_]
+                        S += g[a_] * acc
+                for j in range(nsel):
+                    s = nb_idx[j]
+                    d2 = nb_d2[j]
+                    if d2 < 0.0:
+                        continue
+                    phi = nb_phi[j]  # W[s] is unchanged since the support query
+                    _grad(W, s, x, y, phi, d2, g)
+                    for a_ in range(4):
+                        acc = 0.0
+                        for b_ in range(4):
+                            acc += P[s, a_, b_] * g[b_]
+                        pb[a_] = acc
+                    for a_ in range(4):
+                        dw[a_] = pb[a_] * r / S
+                    _apply_step(W, s, dw, cf)
+                    sig = W[s, 1]
+                    for a_ in range(4):
+                        for b_ in range(a_, 4):
+                            v = P[s, a_, b_] - pb[a_] * pb[b_] / S
+                            P[s, a_, b_] = v
+                            P[s, b_, a_] = v
+                    P[s, 0, 0] += q * p0
+                    P[s, 1, 1] += q * p0
+                    P[s, 2, 2] += q * p0 * sig * sig
+                    P[s, 3, 3] += q * p0 * sig * sig
+                    if not _block_finite(W, P, s):
+                        st[ST_DIVERGED] += 1
+                        _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head,
+                                l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
+                        continue
+                    if not _block_healthy(P, s, cov_limit):
+                        st[ST_RESET] += 1
+                        _reset_block(P, s, sig, p0)
+                    _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt,
+                                    l_prv, l_cell, l_lev, lev_off, lev_count)
+                p00 = fs[FS_P00]
+                fs[FS_A0] += p00 * r / S
+                fs[FS_P00] = p00 - p00 * p00 / S + q * p0
+            elif update == UPDATE_GD:
+                rate = cf[CF_GD]
+                for u in range(m):
+                    s = sup_idx[u]
+                    if alive[s] == 0:
+                        continue
+                    _grad(W, s, x, y, sup_phi[u], sup_d2[u], g)
+                    sig = W[s, 1]
+                    dw[0] = rate * g[0] * r
+                    dw[1] = rate * g[1] * r
+                    dw[2] = rate * sig * sig * g[2] * r
+                    dw[3] = rate * sig * sig * g[3] * r
+                    _apply_step(W, s, dw, cf)
+                    _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt,
+                                    l_prv, l_cell, l_lev, lev_off, lev_count)
+                fs[FS_A0] += rate * r
+            else:
+                # GEKF: one covariance over a0 and every alive neuron.
+                na = 0
+                for s in range(st[ST_SLOTS]):
+                    if alive[s]:
+                        gk_idx[na] = s
+                        na += 1
+                for j in range(nparam_full):
+                    gb[j] = 0.0
+                gb[0] = 1.0
+                for u in range(m):
+                    s = sup_idx[u]
+                    _grad(W, s, x, y, sup_phi[u], sup_d2[u], g)
+                    for a_ in range(4):
+                        gb[1 + 4 * s + a_] = g[a_]
+                # pb = P b, restricted to live rows (dead rows are zero)
+                S = R
+                for jj in range(na + 1):
+                    for a_ in range(1 if jj == 0 else 4):
+                        row = 0 if jj == 0 else 1 + 4 * gk_idx[jj - 1] + a_
+                        acc = Pg[row, 0] * gb[0]
+                        for u in range(m):
+                            cb = 1 + 4 * sup_idx[u]
+                            for b_ in range(4):
+                                acc += Pg[row, cb + b_] * gb[cb + b_]
+                        gpb[row] = acc
+                        S += gb[row] * acc
+                fs[FS_A0] += gpb[0] * r / S
+                for jj in range(na + 1):
+                    for a_ in range(1 if jj == 0 else 4):
+                        row = 0 if jj == 0 else 1 + 4 * gk_idx[jj - 1] + a_
+                        for kk in range(na + 1):
+                            for b_ in range(1 if kk == 0 else 4):
+                                col = 0 if kk == 0 else 1 + 4 * gk_idx[kk - 1] + b_
+                                Pg[row, col] -= gpb[row] * gpb[col] / S
+                Pg[0, 0] += q * p0
+                for jj in range(na):
+                    s = gk_idx[jj]
+                    b = 1 + 4 * s
+                    for a_ in range(4):
+                        dw[a_] = gpb[b + a_] * r / S
+                    _apply_step(W, s, dw, cf)
+                    sig = W[s, 1]
+                    Pg[b, b] += q * p0
+                    Pg[b + 1, b + 1] += q * p0
+                    Pg[b + 2, b + 2] += q * p0 * sig * sig
+                    Pg[b + 3, b + 3] += q * p0 * sig * sig
+                    ok = True
+                    for a_ in range(4):
+                        if not np.isfinite(W[s, a_]) or not (Pg[b + a_, b + a_] > 0.0):
+                            ok = False
+                    if not ok:
+                        st[ST_DIVERGED] += 1
+                        _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head,
+                                l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
+                        continue
+                    _reindex_neuron(s, W, cf, ci, c_head, c_nxt, c_prv, c_cell, l_head, l_nxt,
+                                    l_prv, l_cell, l_lev, lev_off, lev_count)
+
+            # Stage 3: pruning by contribution ratio r_k = |Pi_k| / sum |Pi_j| (eqs. 11-13),
+            # both of the output of Stage 1 (before the update: numerator and denominator of
+            # the same network)
+            if prune_mode == PRUNE_LITERAL:
+                thr = cf[CF_PRUNE] * sabs
+                for u in range(m):
+                    s = sup_idx[u]
+                    if alive[s] and sup_pi[u] >= thr:
+                        last_active[s] = t
+                while st[ST_HEAP] > 0 and hk[0] <= t:
+                    s = hs[0]
+                    gg = hg[0]
+                    st[ST_HEAP] = _heap_pop(hk, hs, hg, st[ST_HEAP])
+                    if alive[s] == 0 or gen[s] != gg:
+                        continue
+                    due = last_active[s] + pwin
+                    if due > t:
+                        st[ST_HEAP] = _heap_push_checked(hk, hs, hg, st[ST_HEAP], due, s, gg,
+                                                         alive, gen)
+                    else:
+                        st[ST_PRUNED] += 1
+                        _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell, l_head,
+                                l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
+            elif prune_mode == PRUNE_SUPPORT:
+                thr = cf[CF_PRUNE] * sabs
+                for u in range(m):
+                    s = sup_idx[u]
+                    ms = (miss[s] + 1) * (sup_pi[u] < thr)  # no branch; reset on slot reuse
+                    miss[s] = ms
+                    if ms >= pwin and alive[s] != 0:
+                        st[ST_PRUNED] += 1
+                        _remove(s, alive, gen, free, st, c_head, c_nxt, c_prv, c_cell,
+                                l_head, l_nxt, l_prv, l_cell, l_lev, lev_count, Pg, nparam_full)
+            st[ST_T] = t + 1
+            pos += 1
+        return DONE, pos
+
+    return run_steps
+
+
+_RUN_STEPS: dict = {}
+
+
+def run_steps_for(update: int, prune_mode: int, decay: int):
+    """Return the learning kernel for ``(update, prune_mode, decay)`` (``UPDATE_*``, ...)."""
+    key = (int(update), int(prune_mode), int(decay))
+    kernel = _RUN_STEPS.get(key)
+    if kernel is None:
+        kernel = _RUN_STEPS[key] = _make_run_steps(*key)
+    return kernel
+
+
+#: The default path's kernel (NEKF on the nearest neuron, support pruning, decay by
+#: observation index).
+run_steps = run_steps_for(UPDATE_NEKF, PRUNE_SUPPORT, DECAY_OBSERVATION)
 
 
 @njit(cache=True)
