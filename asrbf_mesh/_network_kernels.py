@@ -387,7 +387,60 @@ def _rows_by_cell(pts, rows, lo, h, g):
     return order, count
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@njit(cache=True, nogil=True)
+def _gram_new_cells(pts, z, order, count, c0, c1, supp2, start, items, pstart, packed,
+                    first, part, ap):
+    """:func:`gram_new_under` over the cells ``c0:c1``; returns their sum of ``|z|``."""
+    px, py, inv = packed[0], packed[1], packed[2]
+    longest = 0
+    for c in range(pstart.shape[0] - 1):
+        longest = max(longest, pstart[c + 1] - pstart[c])
+    tt = np.empty(longest)
+    ee = np.empty(longest)
+    block = np.empty((longest, longest))  # appended neuron x list entry
+    bias = np.empty(longest)
+    atr = np.empty(longest)
+    total = 0.0
+    for c in range(c0, c1):
+        if count[c] == count[c + 1]:
+            continue
+        a = start[c]
+        n = start[c + 1] - a
+        k0 = 0  # the list's first appended neuron
+        while k0 < n and items[a + k0] + 1 < first:
+            k0 += 1
+        nn = n - k0
+        if nn == 0:  # no appended neuron meets the cell: zero columns
+            for r_ in range(count[c], count[c + 1]):
+                total += abs(z[order[r_]])
+            continue
+        block[:nn, :n] = 0.0
+        bias[:nn] = 0.0
+        atr[:nn] = 0.0
+        s0 = pstart[c]
+        s1 = pstart[c + 1]
+        for r_ in range(count[c], count[c + 1]):
+            i = order[r_]
+            _cell_phi(pts[i, 0], pts[i, 1], px[s0:s1], py[s0:s1], inv[s0:s1], tt, ee)
+            _in_support(tt, ee, n, supp2)
+            r = z[i]
+            total += abs(r)
+            for b in range(nn):
+                v = ee[k0 + b]
+                if v != 0.0:
+                    atr[b] += v * r
+                    bias[b] += v
+                    _add_scaled(block, b, v, ee, n)
+        for b in range(nn):
+            cp = items[a + k0 + b] + 1
+            ap[cp] += atr[b]
+            row = cp - first
+            part[row, 0] += bias[b]
+            for q in range(n):
+                part[row, items[a + q] + 1] += block[b, q]
+    return total
+
+
 def gram_new_under(pts, z, rows, support, lo, h, g, start, items, pstart, packed, first,
                    parts, atr_parts):
     """Add the rows ``p >= first`` of ``A'A`` (whole) and of ``A'z`` over points ``rows``.
@@ -405,72 +458,33 @@ def gram_new_under(pts, z, rows, support, lo, h, g, start, items, pstart, packed
     main piece, 74,100 rows, 378 appended neurons, one thread: 18 ms, 45 ms point by
     point with scattered sums). The cells are cut in two fixed halves at the middle
     point, each summed in order into its own ``parts[h]`` (row ``p - first``) and
-    ``atr_parts[h]`` on its own thread; the caller adds the halves. The cut depends on
-    the rows only, so the sums are the same bit for bit on one thread or two. Returns
-    the sum of ``|z|`` over the rows.
+    ``atr_parts[h]``, the second on a thread of its own when numba may use two (a serial
+    kernel on two threads: a ``prange`` over the halves took 2 s longer to compile); the
+    caller adds the halves. The cut depends on the rows only, so the sums are the same
+    bit for bit on one thread or two. Returns the sum of ``|z|`` over the rows.
     """
-    m = rows.shape[0]
-    ncell = g * g
-    supp2 = support * support
-    px, py, inv = packed[0], packed[1], packed[2]
     order, count = _rows_by_cell(pts, rows, lo, h, g)
-    split = 0
-    while split < ncell and count[split] < m // 2:
-        split += 1
-    longest = 0
-    for c in range(ncell):
-        longest = max(longest, pstart[c + 1] - pstart[c])
-    sums = np.zeros(2)
-    for hh in prange(2):
-        c0 = 0 if hh == 0 else split
-        c1 = split if hh == 0 else ncell
-        tt = np.empty(longest)
-        ee = np.empty(longest)
-        block = np.empty((longest, longest))  # appended neuron x list entry
-        bias = np.empty(longest)
-        atr = np.empty(longest)
-        part = parts[hh]
-        ap = atr_parts[hh]
-        total = 0.0
-        for c in range(c0, c1):
-            if count[c] == count[c + 1]:
-                continue
-            a = start[c]
-            n = start[c + 1] - a
-            k0 = 0  # the list's first appended neuron
-            while k0 < n and items[a + k0] + 1 < first:
-                k0 += 1
-            nn = n - k0
-            if nn == 0:  # no appended neuron meets the cell: zero columns
-                for r_ in range(count[c], count[c + 1]):
-                    total += abs(z[order[r_]])
-                continue
-            block[:nn, :n] = 0.0
-            bias[:nn] = 0.0
-            atr[:nn] = 0.0
-            s0 = pstart[c]
-            s1 = pstart[c + 1]
-            for r_ in range(count[c], count[c + 1]):
-                i = order[r_]
-                _cell_phi(pts[i, 0], pts[i, 1], px[s0:s1], py[s0:s1], inv[s0:s1], tt, ee)
-                _in_support(tt, ee, n, supp2)
-                r = z[i]
-                total += abs(r)
-                for b in range(nn):
-                    v = ee[k0 + b]
-                    if v != 0.0:
-                        atr[b] += v * r
-                        bias[b] += v
-                        _add_scaled(block, b, v, ee, n)
-            for b in range(nn):
-                cp = items[a + k0 + b] + 1
-                ap[cp] += atr[b]
-                row = cp - first
-                part[row, 0] += bias[b]
-                for q in range(n):
-                    part[row, items[a + q] + 1] += block[b, q]
-        sums[hh] = total
-    return sums[0] + sums[1]
+    ncell = g * g
+    split = int(np.searchsorted(count[:ncell], len(rows) // 2, side="left"))
+    args = (pts, z, order, count)
+    tail = (support * support, start, items, pstart, packed, first)
+    if get_num_threads() < 2:
+        return (_gram_new_cells(*args, 0, split, *tail, parts[0], atr_parts[0])
+                + _gram_new_cells(*args, split, ncell, *tail, parts[1], atr_parts[1]))
+    import threading
+
+    got = [0.0]
+
+    def second() -> None:
+        got[0] = _gram_new_cells(*args, split, ncell, *tail, parts[1], atr_parts[1])
+
+    worker = threading.Thread(target=second)
+    worker.start()
+    try:
+        first_half = _gram_new_cells(*args, 0, split, *tail, parts[0], atr_parts[0])
+    finally:
+        worker.join()
+    return first_half + got[0]
 
 
 @njit(cache=True, nogil=True)
