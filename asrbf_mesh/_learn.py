@@ -292,7 +292,7 @@ def learn(hf: HeightField, config: FitConfig | None = None, *, seed: int = 0,
     return learn_from(passes(), n, cfg, d_min, progress=progress)
 
 
-_WARM: list[bool] = []
+_WARM: set[tuple[str, str, str]] = set()
 
 
 def _warm_up(cfg: FitConfig, d_min: float) -> None:
@@ -302,11 +302,13 @@ def _warm_up(cfg: FitConfig, d_min: float) -> None:
     microseconds per step of a fit never include the compilation (the first fit after an
     install compiled for about 12 s).
     """
-    if _WARM:
+    # one kernel per updater, pruning rule and decay (run_steps_for): each is warmed once
+    key = (cfg.update, cfg.pruning, cfg.decay)
+    if key in _WARM:
         return
     state = _State(cfg, d_min, 1, 1, cfg.window, cfg.prune_window or cfg.window)
     state.run(np.full((1, 2), 0.5), np.zeros(1), np.zeros(1, dtype=np.int64), 1)
-    _WARM.append(True)
+    _WARM.add(key)
 
 
 def learn_from(batches: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int,

@@ -412,3 +412,20 @@ def test_gekf_beyond_its_neuron_limit_raises_instead_of_hanging(franke39, monkey
     monkeypatch.setattr(learn_mod, "_GEKF_MAX", 8)
     with pytest.raises(FitError, match="limited to 8 neurons"):
         am.fit(franke39, FitConfig(update="gekf", polish="none", passes=1), seed=0, pieces=1)
+
+
+def test_each_learning_kernel_is_warmed_before_its_fit_is_timed(franke40) -> None:
+    # one compiled kernel per updater, pruning rule and decay: a fit with another updater
+    # after a default fit warms its own kernel first, so its learning time and
+    # microseconds per step never include a compilation
+    from asrbf_mesh import _learn
+    from asrbf_mesh import _learn_kernels as lk
+
+    hf = to_height_field(franke40)
+    learn(hf, FitConfig(passes=1), seed=0)
+    learn(hf, FitConfig(passes=1, update="gd", pruning="literal"), seed=0)
+    assert {("nekf", "support", "observation"), ("gd", "literal", "observation")} \
+        <= _learn._WARM
+    gd = lk.run_steps_for(lk.UPDATE_GD, lk.PRUNE_LITERAL, lk.DECAY_OBSERVATION)
+    assert gd is not lk.run_steps and gd.signatures  # its own kernel, compiled
+    assert lk.run_steps_for(lk.UPDATE_GD, lk.PRUNE_LITERAL, lk.DECAY_OBSERVATION) is gd
