@@ -13,9 +13,10 @@ nearest of 50,000 take a few milliseconds where a k-d tree took some 30.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit
 
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
+from ._network_kernels import SERIAL_BELOW, in_threads
 
 
 def bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -144,14 +145,10 @@ def _nearest(pts, q, k, lo, h, gx, gy, start, items, best_d, best_i):
     return held
 
 
-@njit(cache=True, parallel=True, nogil=True)
-def _knn(xy, at, k, lo, h, gx, gy, start, items):
-    m = at.shape[0]
-    dist = np.empty((m, k))
-    idx = np.empty((m, k), np.int64)
-    for i in prange(m):
+@njit(cache=True, nogil=True)
+def _knn(xy, at, k, lo, h, gx, gy, start, items, dist, idx, i0, i1):
+    for i in range(i0, i1):
         _nearest(xy, xy[at[i]], k, lo, h, gx, gy, start, items, dist[i], idx[i])
-    return dist, idx
 
 
 def knn(xy: np.ndarray, at: np.ndarray, k: int, grid: tuple | None = None
@@ -172,7 +169,12 @@ def knn(xy: np.ndarray, at: np.ndarray, k: int, grid: tuple | None = None
     if not 1 <= k <= len(xy):
         raise ValueError(f"knn: k must be in 1..{len(xy)}, got {k}")
     grid = point_grid(xy) if grid is None else grid
-    d2, idx = _knn(xy, np.ascontiguousarray(at, np.int64), int(k), *grid)
+    at = np.ascontiguousarray(at, np.int64)
+    d2 = np.empty((len(at), int(k)))
+    idx = np.empty((len(at), int(k)), np.int64)
+    # the queries in parts on threads of their own (a query's answer is its own)
+    in_threads(_knn, len(at), 1 if len(at) < SERIAL_BELOW else get_num_threads(), xy, at,
+               int(k), *grid, d2, idx)
     return np.sqrt(d2), idx
 
 
@@ -253,7 +255,7 @@ def plane_slopes(xy: np.ndarray, z: np.ndarray, at: np.ndarray, k: int, ratio_x:
     :func:`point_grid` of ``xy``.
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64)
-    _, idx = _knn(xy, np.ascontiguousarray(at, np.int64), int(k), *grid)
+    _, idx = knn(xy, at, k, grid)
     return _planes(xy, np.ascontiguousarray(z, np.float64), idx, float(ratio_x),
                    float(ratio_y))
 

@@ -226,14 +226,52 @@ def evaluate_values(pts, a0, packed, pstart, support, lo, h, g):
     return _values_parallel(pts, a0, packed, pstart, support, lo, h, g, get_num_threads())
 
 
-@njit(cache=True, parallel=True, nogil=True)
-def evaluate_with_gradient(pts, a0, centers, widths, weights, support, lo, h, g, start, items):
-    """Evaluate f (M,) and its gradient df/dx, df/dy (M, 2) at unit-square points (M, 2)."""
-    m = pts.shape[0]
-    out = np.empty(m)
-    grad = np.empty((m, 2))
+def in_threads(kernel, n: int, threads: int, *args) -> None:
+    """Run ``kernel(*args, i0, i1)`` over ``range(n)`` cut in ``threads`` contiguous parts.
+
+    ``kernel`` is a serial ``nogil`` kernel that writes its results into arrays among
+    ``args``; the parts after the first run on a pool of Python threads kept for the
+    process, the first on this thread. A ``prange`` kernel does the same but costs about
+    half a second to a second more to compile (numba's parallel transform), which a
+    machine's first run pays. Kernels called over and over on chunks (the design rows of
+    the weight polish, the evaluation) keep their ``prange``: OpenMP's waiting threads
+    start a part sooner than a pool's (the polish's design rows, 8,192-row chunks of the
+    face map, took 32 ms through the pool against 28 ms).
+    """
+    threads = max(1, min(int(threads), n))
+    if threads == 1:
+        kernel(*args, 0, n)
+        return
+    cuts = [n * t // threads for t in range(threads + 1)]
+    pool = _pool()
+    rest = [pool.submit(kernel, *args, cuts[t], cuts[t + 1]) for t in range(1, threads)]
+    try:
+        kernel(*args, cuts[0], cuts[1])
+    finally:
+        for f in rest:
+            f.result()
+
+
+_POOL: list = []
+
+
+def _pool():
+    """Return the process's pool of threads for :func:`in_threads` (made on first use)."""
+    if not _POOL:
+        import atexit
+        from concurrent.futures import ThreadPoolExecutor
+
+        pool = ThreadPoolExecutor(max_workers=64, thread_name_prefix="asrbf-kernel")
+        atexit.register(pool.shutdown, wait=False)
+        _POOL.append(pool)
+    return _POOL[0]
+
+
+@njit(cache=True, nogil=True)
+def _values_gradient(pts, a0, centers, widths, weights, support, lo, h, g, start, items,
+                     out, grad, i0, i1):
     supp2 = support * support
-    for i in prange(m):
+    for i in range(i0, i1):
         x, y, c = _locate(pts, i, lo, h, g)
         f = a0
         gx = 0.0
@@ -249,7 +287,21 @@ def evaluate_with_gradient(pts, a0, centers, widths, weights, support, lo, h, g,
         out[i] = f
         grad[i, 0] = gx
         grad[i, 1] = gy
+
+
+def evaluate_with_gradient(pts, a0, centers, widths, weights, support, lo, h, g, start, items):
+    """Evaluate f (M,) and its gradient df/dx, df/dy (M, 2) at unit-square points (M, 2)."""
+    m = pts.shape[0]
+    out = np.empty(m)
+    grad = np.empty((m, 2))
+    in_threads(_values_gradient, m, _threads_for(m), pts, a0, centers, widths, weights,
+               support, lo, h, g, start, items, out, grad)
     return out, grad
+
+
+def _threads_for(m: int) -> int:
+    """Threads for ``m`` points: one below :data:`SERIAL_BELOW`, else numba's setting."""
+    return 1 if m < SERIAL_BELOW else get_num_threads()
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -307,7 +359,18 @@ def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, 
     return indptr, cols, vals
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@njit(cache=True, nogil=True)
+def _under_any(pts, centers, widths, support, lo, h, g, start, items, out, i0, i1):
+    supp2 = support * support
+    for i in range(i0, i1):
+        x, y, c = _locate(pts, i, lo, h, g)
+        for p in range(start[c], start[c + 1]):
+            _, _, d2, s2 = _offset(x, y, centers, widths, items[p])
+            if d2 < supp2 * s2:
+                out[i] = True
+                break
+
+
 def under_any(pts, centers, widths, support, lo, h, g, start, items):
     """Whether each point lies in the truncated support of any of the neurons.
 
@@ -315,15 +378,9 @@ def under_any(pts, centers, widths, support, lo, h, g, start, items):
     exactly when its design row has that neuron's column.
     """
     m = pts.shape[0]
-    supp2 = support * support
     out = np.zeros(m, dtype=np.bool_)
-    for i in prange(m):
-        x, y, c = _locate(pts, i, lo, h, g)
-        for p in range(start[c], start[c + 1]):
-            _, _, d2, s2 = _offset(x, y, centers, widths, items[p])
-            if d2 < supp2 * s2:
-                out[i] = True
-                break
+    in_threads(_under_any, m, _threads_for(m), pts, centers, widths, support, lo, h, g,
+               start, items, out)
     return out
 
 
@@ -458,7 +515,7 @@ def gram_new_under(pts, z, rows, support, lo, h, g, start, items, pstart, packed
     main piece, 74,100 rows, 378 appended neurons, one thread: 18 ms, 45 ms point by
     point with scattered sums). The cells are cut in two fixed halves at the middle
     point, each summed in order into its own ``parts[h]`` (row ``p - first``) and
-    ``atr_parts[h]``, the second on a thread of its own when numba may use two (a serial
+    ``atr_parts[h]``, the second on a pooled thread when numba may use two (a serial
     kernel on two threads: a ``prange`` over the halves took 2 s longer to compile); the
     caller adds the halves. The cut depends on the rows only, so the sums are the same
     bit for bit on one thread or two. Returns the sum of ``|z|`` over the rows.
@@ -471,20 +528,13 @@ def gram_new_under(pts, z, rows, support, lo, h, g, start, items, pstart, packed
     if get_num_threads() < 2:
         return (_gram_new_cells(*args, 0, split, *tail, parts[0], atr_parts[0])
                 + _gram_new_cells(*args, split, ncell, *tail, parts[1], atr_parts[1]))
-    import threading
-
-    got = [0.0]
-
-    def second() -> None:
-        got[0] = _gram_new_cells(*args, split, ncell, *tail, parts[1], atr_parts[1])
-
-    worker = threading.Thread(target=second)
-    worker.start()
+    second = _pool().submit(_gram_new_cells, *args, split, ncell, *tail, parts[1],
+                            atr_parts[1])
     try:
         first_half = _gram_new_cells(*args, 0, split, *tail, parts[0], atr_parts[0])
     finally:
-        worker.join()
-    return first_half + got[0]
+        second_half = second.result()
+    return first_half + second_half
 
 
 @njit(cache=True, nogil=True)
