@@ -252,19 +252,29 @@ def in_threads(kernel, n: int, threads: int, *args) -> None:
             f.result()
 
 
-_POOL: list = []
+_POOL: dict = {}
 
 
 def _pool():
-    """Return the process's pool of threads for :func:`in_threads` (made on first use)."""
-    if not _POOL:
+    """Return this process's pool of threads for :func:`in_threads` (made on first use).
+
+    One per process id: a child forked after the parent used its pool gets a pool of
+    its own (the parent's threads do not exist in the child, and a copied pool would
+    wait for them forever).
+    """
+    import os
+
+    pid = os.getpid()
+    pool = _POOL.get(pid)
+    if pool is None:
         import atexit
         from concurrent.futures import ThreadPoolExecutor
 
-        pool = ThreadPoolExecutor(max_workers=64, thread_name_prefix="asrbf-kernel")
+        _POOL.clear()
+        pool = _POOL[pid] = ThreadPoolExecutor(max_workers=64,
+                                               thread_name_prefix="asrbf-kernel")
         atexit.register(pool.shutdown, wait=False)
-        _POOL.append(pool)
-    return _POOL[0]
+    return pool
 
 
 @njit(cache=True, nogil=True)

@@ -457,3 +457,19 @@ def test_empty_network_evaluates_to_bias() -> None:
     pts = np.array([[0.2, 0.4], [-1.0, 2.0]])
     np.testing.assert_array_equal(net.evaluate(pts, unit=True), [0.3, 0.3])
     np.testing.assert_array_equal(net.gradient(pts, unit=True), np.zeros((2, 2)))
+
+
+def test_threaded_kernels_work_in_a_child_forked_after_the_parent_used_them() -> None:
+    # the pool of threads is per process: a forked child must not wait for the
+    # parent's threads (which do not exist in it)
+    import multiprocessing as mp
+
+    from asrbf_mesh._grid_knn import knn
+
+    rng = np.random.default_rng(0)
+    xy = rng.random((20_000, 2))
+    ref = knn(xy, np.arange(len(xy)), 4)  # the parent's pool is up now
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        got = pool.apply_async(knn, (xy, np.arange(len(xy)), 4)).get(timeout=120)
+    assert np.array_equal(got[1], ref[1]) and np.array_equal(got[0], ref[0])
