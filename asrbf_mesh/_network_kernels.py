@@ -221,9 +221,46 @@ def _values_serial(pts, a0, packed, pstart, support, lo, h, g):
 
 def evaluate_values(pts, a0, packed, pstart, support, lo, h, g):
     """Evaluate f (M,) at unit-square points (M, 2) (threads from :data:`SERIAL_BELOW` up)."""
-    if pts.shape[0] < SERIAL_BELOW:
+    m = pts.shape[0]
+    if m < SERIAL_BELOW:
         return _values_serial(pts, a0, packed, pstart, support, lo, h, g)
-    return _values_parallel(pts, a0, packed, pstart, support, lo, h, g, get_num_threads())
+    threads = get_num_threads()
+    if not _forked():
+        return _values_parallel(pts, a0, packed, pstart, support, lo, h, g, threads)
+    # a forked child: the same blocks on the pool (see _forked), the same values
+    out = np.empty(m)
+    n = max(min(BLOCK, (m + 4 * threads - 1) // (4 * threads)), min(g * g, 16 * BLOCK), 1)
+    in_threads(_values_blocks, (m + n - 1) // n, threads, pts, out, a0, packed, pstart,
+               support, lo, h, g, n)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _values_blocks(pts, out, a0, packed, pstart, support, lo, h, g, n, b0, b1):
+    """Evaluate blocks ``b0:b1`` of ``n`` points each into ``out``."""
+    m = pts.shape[0]
+    for b in range(b0, b1):
+        _values_block(pts, b * n, min(m, (b + 1) * n), out, a0, packed, pstart,
+                      support * support, lo, h, g)
+
+
+#: The id of the process that imported this module: a process with another id was forked
+#: from it (see :func:`_forked`).
+_PARENT = __import__("os").getpid()
+
+
+def _forked() -> bool:
+    """Whether this process was forked after this module was imported.
+
+    numba's OpenMP layer kills a forked child at its first parallel kernel when the
+    parent ran one ("fork() called from a process already using GNU OpenMP"): a forked
+    child (``multiprocessing`` on Linux) runs the ``prange`` kernels' work as serial
+    kernels on its own pool of Python threads instead (:func:`in_threads`), which gives
+    the same bits.
+    """
+    import os
+
+    return os.getpid() != _PARENT
 
 
 def in_threads(kernel, n: int, threads: int, *args) -> None:
@@ -314,26 +351,100 @@ def _threads_for(m: int) -> int:
     return 1 if m < SERIAL_BELOW else get_num_threads()
 
 
-@njit(cache=True, parallel=True, nogil=True)
 def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, full):
     """Sparse Jacobian of f at ``pts`` in CSR form ``(indptr, indices, data)``.
 
     Column 0 is the bias a0 (ones). With ``full=False`` column 1 + k is the weight
     a_k; with ``full=True`` four columns per neuron, (a, log sigma, ux, uy) at
-    1 + 4k .. 4 + 4k.
+    1 + 4k .. 4 + 4k. A ``prange`` kernel (:func:`_design_rows`); in a forked child the
+    same rows counted and filled by serial kernels on a pool of threads (:func:`_forked`).
     """
+    if not _forked():
+        return _design_rows(pts, centers, widths, weights, support, lo, h, g, start, items,
+                            full)
+    m = pts.shape[0]
+    threads = 1 if m < SERIAL_BELOW else get_num_threads()
+    counts = np.empty(m, np.int64)
+    in_threads(_design_counts, m, threads, pts, centers, widths, support, lo, h, g, start,
+               items, 4 if full else 1, counts)
+    indptr = np.zeros(m + 1, np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    cols = np.empty(int(indptr[m]), np.int64)
+    vals = np.empty(int(indptr[m]))
+    in_threads(_design_fill, m, threads, pts, centers, widths, weights, support, lo, h, g,
+               start, items, bool(full), indptr, cols, vals)
+    return indptr, cols, vals
+
+
+@njit(cache=True, nogil=True)
+def _design_counts(pts, centers, widths, support, lo, h, g, start, items, per, counts,
+                   i0, i1):
+    supp2 = support * support
+    for i in range(i0, i1):
+        counts[i] = _design_count(pts, centers, widths, supp2, lo, h, g, start, items, per, i)
+
+
+@njit(cache=True, inline="always")
+def _design_count(pts, centers, widths, supp2, lo, h, g, start, items, per, i):
+    """Length of design row ``i``: the bias and ``per`` entries per neuron over the point."""
+    x, y, c = _locate(pts, i, lo, h, g)
+    cnt = 1
+    for p in range(start[c], start[c + 1]):
+        _, _, d2, s2 = _offset(x, y, centers, widths, items[p])
+        if d2 < supp2 * s2:  # the same test as the fill, to the last bit
+            cnt += per
+    return cnt
+
+
+@njit(cache=True, nogil=True)
+def _design_fill(pts, centers, widths, weights, support, lo, h, g, start, items, full,
+                 indptr, cols, vals, i0, i1):
+    supp2 = support * support
+    for i in range(i0, i1):
+        _design_row(pts, centers, widths, weights, supp2, lo, h, g, start, items, full,
+                    indptr, cols, vals, i)
+
+
+@njit(cache=True, inline="always")
+def _design_row(pts, centers, widths, weights, supp2, lo, h, g, start, items, full, indptr,
+                cols, vals, i):
+    """Fill design row ``i`` into the CSR arrays (its place: ``indptr[i]``)."""
+    x, y, c = _locate(pts, i, lo, h, g)
+    n = indptr[i]
+    cols[n] = 0
+    vals[n] = 1.0
+    n += 1
+    for p in range(start[c], start[c + 1]):
+        j = items[p]
+        dx, dy, d2, s2 = _offset(x, y, centers, widths, j)
+        if d2 < supp2 * s2:
+            phi = np.exp(-d2 / s2)
+            if full:
+                ap = weights[j] * phi
+                cols[n] = 4 * j + 1
+                cols[n + 1] = 4 * j + 2
+                cols[n + 2] = 4 * j + 3
+                cols[n + 3] = 4 * j + 4
+                vals[n] = phi
+                vals[n + 1] = 2.0 * ap * d2 / s2
+                vals[n + 2] = 2.0 * ap * dx / s2
+                vals[n + 3] = 2.0 * ap * dy / s2
+                n += 4
+            else:
+                cols[n] = j + 1
+                vals[n] = phi
+                n += 1
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def _design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, full):
+    """:func:`design_rows` by a ``prange`` kernel."""
     m = pts.shape[0]
     supp2 = support * support
     per = 4 if full else 1
     counts = np.empty(m, np.int64)
     for i in prange(m):
-        x, y, c = _locate(pts, i, lo, h, g)
-        cnt = 1
-        for p in range(start[c], start[c + 1]):
-            _, _, d2, s2 = _offset(x, y, centers, widths, items[p])
-            if d2 < supp2 * s2:  # the same test as the fill below, to the last bit
-                cnt += per
-        counts[i] = cnt
+        counts[i] = _design_count(pts, centers, widths, supp2, lo, h, g, start, items, per, i)
     indptr = np.zeros(m + 1, np.int64)
     for i in range(m):
         indptr[i + 1] = indptr[i] + counts[i]
@@ -341,31 +452,8 @@ def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, 
     cols = np.empty(nnz, np.int64)
     vals = np.empty(nnz)
     for i in prange(m):
-        x, y, c = _locate(pts, i, lo, h, g)
-        n = indptr[i]
-        cols[n] = 0
-        vals[n] = 1.0
-        n += 1
-        for p in range(start[c], start[c + 1]):
-            j = items[p]
-            dx, dy, d2, s2 = _offset(x, y, centers, widths, j)
-            if d2 < supp2 * s2:
-                phi = np.exp(-d2 / s2)
-                if full:
-                    ap = weights[j] * phi
-                    cols[n] = 4 * j + 1
-                    cols[n + 1] = 4 * j + 2
-                    cols[n + 2] = 4 * j + 3
-                    cols[n + 3] = 4 * j + 4
-                    vals[n] = phi
-                    vals[n + 1] = 2.0 * ap * d2 / s2
-                    vals[n + 2] = 2.0 * ap * dx / s2
-                    vals[n + 3] = 2.0 * ap * dy / s2
-                    n += 4
-                else:
-                    cols[n] = j + 1
-                    vals[n] = phi
-                    n += 1
+        _design_row(pts, centers, widths, weights, supp2, lo, h, g, start, items, full,
+                    indptr, cols, vals, i)
     return indptr, cols, vals
 
 
@@ -662,5 +750,9 @@ def numba_threads(n: int):
 
 
 def warm_threads() -> None:
-    """Run a tiny parallel kernel: numba picks its threading layer on the first one."""
-    _warm_threads(2)
+    """Run a tiny parallel kernel: numba picks its threading layer on the first one.
+
+    Not in a forked child, which runs no parallel kernel (:func:`_forked`).
+    """
+    if not _forked():
+        _warm_threads(2)

@@ -210,7 +210,8 @@ def parallel_pieces() -> bool:
 
     When numba runs on two threads or more (a batch worker pinned to one does not) and
     its threading layer is OpenMP or TBB: those let several Python threads launch
-    parallel kernels at once; the workqueue layer does not (it aborts the process).
+    parallel kernels at once; the workqueue layer does not (it aborts the process). A
+    forked child launches none (:func:`~asrbf_mesh._network_kernels._forked`): yes.
     """
     import numba
 
@@ -218,6 +219,8 @@ def parallel_pieces() -> bool:
 
     if numba.get_num_threads() < 2:
         return False
+    if _nk._forked():
+        return True
     try:
         layer = numba.threading_layer()
     except ValueError:  # no parallel kernel has run yet: run one

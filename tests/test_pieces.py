@@ -348,3 +348,26 @@ def test_the_piece_map_refines_its_cells_until_the_points_agree() -> None:
     assert pm.cell < spacing and (share >= MIN_AGREEMENT or pm.cell < 0.4 * spacing)
     coarse = PieceMap._raster(uv, labels, spacing)
     assert np.mean(coarse.piece_at(uv) == labels) < share
+
+
+def _fit_bytes(scan: am.Scan) -> tuple[int, bytes]:
+    net = am.fit(scan, seed=0, progress=False)
+    q = np.random.default_rng(1).random((20_000, 2))
+    parts = [net.evaluate(q, unit=True).tobytes()]
+    for p in net.pieces:
+        parts += [np.float64(p.a0).tobytes(), p.centers.tobytes(), p.widths.tobytes(),
+                  p.weights.tobytes()]
+    return net.n_pieces, b"".join(parts)
+
+
+def test_a_child_forked_after_a_fit_fits_the_same_bytes() -> None:
+    # numba's OpenMP layer kills a forked child at its first parallel kernel when the
+    # parent ran one: a forked child runs that work on its own pool of threads instead
+    import multiprocessing as mp
+
+    scan = cliff_scan()
+    ref = _fit_bytes(scan)  # the parent runs its parallel kernels
+    assert ref[0] >= 2
+    with mp.get_context("fork").Pool(1) as pool:
+        got = pool.apply_async(_fit_bytes, (scan,)).get(timeout=300)
+    assert got == ref
