@@ -13,10 +13,10 @@ nearest of 50,000 take a few milliseconds where a k-d tree took some 30.
 from __future__ import annotations
 
 import numpy as np
-from numba import get_num_threads, njit
+from numba import njit
 
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
-from ._network_kernels import SERIAL_BELOW, in_threads
+from ._network_kernels import in_threads, threads_for
 
 
 def bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -173,8 +173,7 @@ def knn(xy: np.ndarray, at: np.ndarray, k: int, grid: tuple | None = None
     d2 = np.empty((len(at), int(k)))
     idx = np.empty((len(at), int(k)), np.int64)
     # the queries in parts on threads of their own (a query's answer is its own)
-    in_threads(_knn, len(at), 1 if len(at) < SERIAL_BELOW else get_num_threads(), xy, at,
-               int(k), *grid, d2, idx)
+    in_threads(_knn, len(at), threads_for(len(at)), xy, at, int(k), *grid, d2, idx)
     return np.sqrt(d2), idx
 
 

@@ -9,6 +9,7 @@ box and points outside the box are still evaluated exactly.
 from __future__ import annotations
 
 import contextlib
+import os
 
 import numpy as np
 from numba import get_num_threads, njit, prange, set_num_threads
@@ -246,7 +247,7 @@ def _values_blocks(pts, out, a0, packed, pstart, support, lo, h, g, n, b0, b1):
 
 #: The id of the process that imported this module: a process with another id was forked
 #: from it (see :func:`_forked`).
-_PARENT = __import__("os").getpid()
+_PARENT = os.getpid()
 
 
 def _forked() -> bool:
@@ -258,8 +259,6 @@ def _forked() -> bool:
     kernels on its own pool of Python threads instead (:func:`in_threads`), which gives
     the same bits.
     """
-    import os
-
     return os.getpid() != _PARENT
 
 
@@ -299,8 +298,6 @@ def _pool():
     its own (the parent's threads do not exist in the child, and a copied pool would
     wait for them forever).
     """
-    import os
-
     pid = os.getpid()
     pool = _POOL.get(pid)
     if pool is None:
@@ -341,12 +338,12 @@ def evaluate_with_gradient(pts, a0, centers, widths, weights, support, lo, h, g,
     m = pts.shape[0]
     out = np.empty(m)
     grad = np.empty((m, 2))
-    in_threads(_values_gradient, m, _threads_for(m), pts, a0, centers, widths, weights,
+    in_threads(_values_gradient, m, threads_for(m), pts, a0, centers, widths, weights,
                support, lo, h, g, start, items, out, grad)
     return out, grad
 
 
-def _threads_for(m: int) -> int:
+def threads_for(m: int) -> int:
     """Threads for ``m`` points: one below :data:`SERIAL_BELOW`, else numba's setting."""
     return 1 if m < SERIAL_BELOW else get_num_threads()
 
@@ -363,7 +360,7 @@ def design_rows(pts, centers, widths, weights, support, lo, h, g, start, items, 
         return _design_rows(pts, centers, widths, weights, support, lo, h, g, start, items,
                             full)
     m = pts.shape[0]
-    threads = 1 if m < SERIAL_BELOW else get_num_threads()
+    threads = threads_for(m)
     counts = np.empty(m, np.int64)
     in_threads(_design_counts, m, threads, pts, centers, widths, support, lo, h, g, start,
                items, 4 if full else 1, counts)
@@ -477,7 +474,7 @@ def under_any(pts, centers, widths, support, lo, h, g, start, items):
     """
     m = pts.shape[0]
     out = np.zeros(m, dtype=np.bool_)
-    in_threads(_under_any, m, _threads_for(m), pts, centers, widths, support, lo, h, g,
+    in_threads(_under_any, m, threads_for(m), pts, centers, widths, support, lo, h, g,
                start, items, out)
     return out
 
