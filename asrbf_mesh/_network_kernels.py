@@ -209,28 +209,18 @@ def _values_parallel(pts, a0, packed, pstart, support, lo, h, g, threads):
     return out
 
 
-@njit(cache=True, nogil=True)
-def _values_serial(pts, a0, packed, pstart, support, lo, h, g):
-    m = pts.shape[0]
-    out = np.empty(m)
-    n = max(BLOCK, min(g * g, 16 * BLOCK))
-    for b in range((m + n - 1) // n):
-        _values_block(pts, b * n, min(m, (b + 1) * n), out, a0, packed, pstart,
-                      support * support, lo, h, g)
-    return out
-
-
 def evaluate_values(pts, a0, packed, pstart, support, lo, h, g):
     """Evaluate f (M,) at unit-square points (M, 2) (threads from :data:`SERIAL_BELOW` up)."""
     m = pts.shape[0]
-    if m < SERIAL_BELOW:
-        return _values_serial(pts, a0, packed, pstart, support, lo, h, g)
-    threads = get_num_threads()
-    if not _forked():
+    threads = threads_for(m)
+    if threads > 1 and not _forked():
         return _values_parallel(pts, a0, packed, pstart, support, lo, h, g, threads)
-    # a forked child: the same blocks on the pool (see _forked), the same values
+    # one thread, or a forked child (see _forked): the same blocks, here or on the pool
     out = np.empty(m)
-    n = max(min(BLOCK, (m + 4 * threads - 1) // (4 * threads)), min(g * g, 16 * BLOCK), 1)
+    if threads == 1:
+        n = max(BLOCK, min(g * g, 16 * BLOCK))
+    else:
+        n = max(min(BLOCK, (m + 4 * threads - 1) // (4 * threads)), min(g * g, 16 * BLOCK), 1)
     in_threads(_values_blocks, (m + n - 1) // n, threads, pts, out, a0, packed, pstart,
                support, lo, h, g, n)
     return out

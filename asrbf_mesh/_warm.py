@@ -104,7 +104,7 @@ def compile_after_learning() -> None:
                  pr.weights, 0.05, pr)
     net = Network(pr.a0, pr.centers, pr.widths, pr.weights, hf.frame, cfg)
     net.evaluate(rng.random((10_000, 2)), unit=True)  # the threaded kernel
-    net.evaluate(rng.random((100, 2)), unit=True)  # the serial one
+    net.evaluate(rng.random((100, 2)), unit=True)  # the one-thread path
     net.gradient(rng.random((100, 2)), unit=True)
     reconstruct(net, footprint=Mesh(pts, faces))
     # last what the command compiles before learning anyway (for the demo, which learns
