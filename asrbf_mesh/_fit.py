@@ -21,6 +21,7 @@ from . import _config
 from ._config import FitConfig
 from ._frame import HeightField, to_height_field
 from ._io import Scan
+from ._jit_cache import compile_seconds
 from ._learn import MIN_POINTS, fit_info, learn_polished, polish_kind, residuals, source_hash
 from ._mesh import Mesh
 from ._network import FitInfo, Network
@@ -117,7 +118,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     if isinstance(pieces, Segmentation) and pieces.n_points != len(points):
         raise ConfigError(f"pieces: the segmentation has {pieces.n_points:,} points, the scan "
                           f"{len(points):,}")
-    t0 = time.perf_counter()
+    t0 = (time.perf_counter(), compile_seconds())
     # the cut into pieces runs beside the search for isolated points, the frame and the
     # sampling measures (mostly KD-tree queries and compiled kernels that release the
     # GIL): on two cores it hides the segmentation's time. It is cut again without the
@@ -189,9 +190,15 @@ def _segmentation(pieces: str | Segmentation, points: np.ndarray, faces: np.ndar
     return segment(mesh, view_axis=view_axis)
 
 
+def _elapsed(t0: tuple[float, float]) -> tuple[float, float]:
+    """Wall seconds since ``t0`` (time, compile seconds), and the compiling among them."""
+    return time.perf_counter() - t0[0], compile_seconds() - t0[1]
+
+
 def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
-                progress: bool | None, order: Any, t0: float, source: str | None, sha: str,
-                seed_out: int, outliers: int | None, *, refine: bool = False) -> Network:
+                progress: bool | None, order: Any, t0: tuple[float, float],
+                source: str | None, sha: str, seed_out: int, outliers: int | None, *,
+                refine: bool = False) -> Network:
     refine = refine and polish != "none"
     learned, pr, params, polish_seconds = learn_polished(
         hf, cfg, polish, seed=seed, progress=progress, order=order,
@@ -205,26 +212,28 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
     net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)
     res = residuals(net, hf)
     abs_mm = np.abs(res) * hf.frame.scale[2]
+    fit_s, compile_s = _elapsed(t0)
     info = fit_info(hf.n_points, net, source, sha, seed_out, hf.spacing, learned, pr,
                     float(np.mean(np.abs(res))), float(abs_mm.mean()), float(abs_mm.std()),
-                    polish_seconds, time.perf_counter() - t0, outliers=outliers,
+                    polish_seconds, fit_s, compile_seconds=compile_s, outliers=outliers,
                     weak_pruned=len(learned.widths) - len(widths) + added,
                     tail_neurons=added)
     return Network(a0, centers, widths, weights, hf.frame, cfg, learned.log, info.to_dict())
 
 
 def _fit_pieces(hf: HeightField, seg: Segmentation, cfg: FitConfig, polish: str, seed: int,
-                progress: bool | None, t0: float, source: str | None, sha: str,
+                progress: bool | None, t0: tuple[float, float], source: str | None, sha: str,
                 seed_out: int, outliers: int | None) -> Network:
     got = learn_pieces(hf, seg, cfg, polish, seed=seed, progress=progress)
     abs_mm = got.absres * hf.frame.scale[2]
+    fit_s, compile_s = _elapsed(t0)
     k = sum(p.n_neurons for p in got.pieces)
     info = FitInfo(
         n_points=hf.n_points, n_neurons=k, source=source, source_sha256=sha, seed=seed_out,
         spacing=hf.spacing, d_min=got.d_min, steps=got.steps, ebar=float(got.absres.mean()),
         ebar_sequential=got.ebar_sequential, error_mean=float(abs_mm.mean()),
         error_std=float(abs_mm.std()), learn_seconds=got.learn_seconds,
-        polish_seconds=got.polish_seconds, fit_seconds=time.perf_counter() - t0,
+        polish_seconds=got.polish_seconds, fit_seconds=fit_s, compile_seconds=compile_s,
         us_per_step=1e6 * got.learn_seconds / max(got.steps, 1), version=__version__,
         outliers=outliers, n_pieces=len(got.pieces),
         weak_pruned=sum(p.info.get("weak_pruned", 0) for p in got.pieces),

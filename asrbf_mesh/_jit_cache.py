@@ -23,13 +23,16 @@ import functools
 import hashlib
 import os
 import shutil
+import threading
 import time
 from pathlib import Path
 
 from numba.core import caching as _caching
 from numba.core import config as _config
+from numba.core import event as _event
 
-__all__ = ["PackageCacheLocator", "cache_dir", "install", "source_key", "tree_key"]
+__all__ = ["PackageCacheLocator", "cache_dir", "compile_seconds", "install", "source_key",
+           "tree_key"]
 
 #: Directories of other source versions kept besides the current one.
 KEEP = 3
@@ -132,6 +135,40 @@ def install() -> None:
     if PackageCacheLocator not in classes:
         classes.insert(0, PackageCacheLocator)
         _prune()
+
+
+class _CompileClock(_event.Listener):
+    """Sums the wall time numba spends compiling, outermost compilations only.
+
+    numba compiles under one process-wide lock, so the outermost compilations of all
+    threads never overlap: their sum is the time the process spent compiling.
+    """
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self._lock = threading.Lock()
+        self._local = threading.local()
+
+    def on_start(self, event: _event.Event) -> None:
+        depth = getattr(self._local, "depth", 0)
+        if depth == 0:
+            self._local.start = time.perf_counter()
+        self._local.depth = depth + 1
+
+    def on_end(self, event: _event.Event) -> None:
+        self._local.depth -= 1
+        if self._local.depth == 0:
+            with self._lock:
+                self.seconds += time.perf_counter() - self._local.start
+
+
+_CLOCK = _CompileClock()
+_event.register("numba:compile", _CLOCK)
+
+
+def compile_seconds() -> float:
+    """Seconds this process has spent compiling kernels so far (a cached kernel: none)."""
+    return _CLOCK.seconds
 
 
 install()

@@ -61,6 +61,9 @@ class FitInfo:
     learn_seconds, polish_seconds, fit_seconds, us_per_step : float or None
         Wall-clock figures; None for a network read from a file (they are not stored,
         so that the same seed gives the same file).
+    compile_seconds : float or None
+        Of ``fit_seconds``, the time spent compiling kernels (the first fit on a machine;
+        0 once they are cached); None where not measured.
     version : str
         asrbf-mesh version that fitted the network.
     streamed : bool
@@ -92,6 +95,7 @@ class FitInfo:
     polish_seconds: float | None = None
     fit_seconds: float | None = None
     us_per_step: float | None = None
+    compile_seconds: float | None = None
     version: str = ""
     streamed: bool = False
     chunk: int | None = None

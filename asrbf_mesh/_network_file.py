@@ -41,7 +41,8 @@ FORMAT_NAME = "asrbf-network"
 #: The version written.
 FORMAT_VERSION = 2
 # wall-clock figures stay in memory only: the same seed must give the same file
-VOLATILE_INFO = ("fit_seconds", "learn_seconds", "polish_seconds", "us_per_step")
+VOLATILE_INFO = ("fit_seconds", "learn_seconds", "polish_seconds", "us_per_step",
+                 "compile_seconds")
 #: Format versions :func:`read_network` reads.
 READABLE_VERSIONS = (1, 2)
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member dates: same network, same bytes

@@ -195,6 +195,9 @@ def _print_summary(s: dict[str, Any], out=None) -> None:
         ("fit time", f"{s['fit_seconds']:.2f} s  ({s['steps']:,} steps, "
                      f"{s['us_per_step']:.2f} us/step, polish {s['polish_seconds']:.2f} s)"),
     ]
+    if (s.get("compile_seconds") or 0.0) >= 0.05:
+        rows.append(("of which compiling", f"{s['compile_seconds']:.2f} s  (the kernels' first "
+                                           "run on this machine: later runs load them)"))
     w = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"  {k:<{w}}  {v}", file=out)

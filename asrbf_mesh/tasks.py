@@ -73,6 +73,7 @@ def _fit_summary(net: Network) -> dict[str, Any]:
         "learn_seconds": info["learn_seconds"],
         "polish_seconds": info["polish_seconds"],
         "us_per_step": info["us_per_step"],
+        "compile_seconds": info.get("compile_seconds"),
         "d_min": info["d_min"],
         "seed": info["seed"],
         "polish": net.config.polish,

@@ -111,6 +111,22 @@ def test_fit_text_summary_follows_sys_stdout(capsys, scan_file: Path, tmp_path: 
     assert "1,600" in stdout
 
 
+def test_fit_summary_tells_compiling_apart(capsys, monkeypatch, scan_file: Path,
+                                           tmp_path: Path) -> None:
+    """A warm fit shows no compile time; one that compiled says how much of it was that."""
+    code, stdout, _ = run(capsys, "fit", scan_file, "-o", tmp_path / "a.asrbf", "--passes", "1")
+    assert code == 0 and "compiling" not in stdout
+    from asrbf_mesh import _fit
+
+    clock = iter([10.0, 12.5])  # the fit's start, its end: 2.5 s compiling in between
+    monkeypatch.setattr(_fit, "compile_seconds", lambda: next(clock))
+    code, stdout, _ = run(capsys, "fit", scan_file, "-o", tmp_path / "b.asrbf", "--passes", "1")
+    assert code == 0
+    assert "of which compiling  2.50 s" in stdout
+    net = am.Network.load(tmp_path / "b.asrbf")
+    assert "compile_seconds" not in net.info  # a timing: not stored (same seed, same file)
+
+
 def test_fit_reports_height_field_warning(capsys, syn, tmp_path: Path) -> None:
     src = tmp_path / "sphere.npy"
     np.save(src, syn.sphere_points(1500))

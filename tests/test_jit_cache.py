@@ -83,3 +83,32 @@ def test_old_source_versions_are_pruned_when_idle(tmp_path: Path, monkeypatch) -
     newest = {d.name for d in dirs[-(jc.KEEP - 1):]}  # recent is the newest of all
     assert "kernels-recent" in left and newest <= left
     assert len(left) == jc.KEEP
+
+
+def test_compile_time_is_counted_once_per_compilation() -> None:
+    """Nested compilations (a kernel compiling its callee) count once; a compiled call, not."""
+    from numba import njit
+
+    @njit
+    def inner(x):
+        return x + 1.0
+
+    @njit
+    def outer(x):
+        return inner(x) * 2.0
+
+    before = jc.compile_seconds()
+    t = time.perf_counter()
+    assert outer(1.0) == 4.0
+    wall = time.perf_counter() - t
+    spent = jc.compile_seconds() - before
+    assert 0.0 < spent <= wall
+    assert outer(2.0) == 6.0
+    assert jc.compile_seconds() - before == spent
+
+
+def test_a_fit_reports_its_compile_time_within_its_own(syn) -> None:
+    import asrbf_mesh as am
+
+    net = am.fit(syn.franke_points(30), seed=0, progress=False, passes=1)
+    assert 0.0 <= net.info["compile_seconds"] <= net.info["fit_seconds"]
