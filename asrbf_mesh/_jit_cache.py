@@ -135,6 +135,10 @@ def install() -> None:
     if PackageCacheLocator not in classes:
         classes.insert(0, PackageCacheLocator)
         _prune()
+        if not _config.CACHE_DIR:  # the prebuilt kernels go where this locator looks
+            from ._prebuilt import install as install_prebuilt
+
+            install_prebuilt(cache_dir(), source_key())
 
 
 class _CompileClock(_event.Listener):

@@ -52,6 +52,7 @@ def test_a_fresh_copy_of_the_source_finds_the_kernels_compiled(tmp_path: Path) -
              " sum(h._heap_push.stats.cache_misses.values()))\n")
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env["ASRBF_CACHE_DIR"] = str(tmp_path / "cache")
+    env["ASRBF_NO_PREBUILT"] = "1"  # what a copy compiles itself, not the shipped kernels
     counts = []
     for clone in ("one", "two"):
         root = tmp_path / clone
@@ -112,3 +113,59 @@ def test_a_fit_reports_its_compile_time_within_its_own(syn) -> None:
 
     net = am.fit(syn.franke_points(30), seed=0, progress=False, passes=1)
     assert 0.0 <= net.info["compile_seconds"] <= net.info["fit_seconds"]
+
+
+PROBE = ("import sys; from asrbf_mesh import _learn_heap as h; import numpy as np\n"
+         "k = np.zeros(4, np.int64)\n"
+         "h._heap_push(k, k.copy(), k.copy(), np.int64(0), np.int64(1), np.int64(2),"
+         " np.int64(3))\n"
+         "from numba.core import config\n"
+         "print(sum(h._heap_push.stats.cache_hits.values()),"
+         " sum(h._heap_push.stats.cache_misses.values()), config.CPU_NAME)\n")
+
+
+def _probe(env: dict[str, str], target: str | None = None) -> tuple[int, int]:
+    """(cache hits, misses) of a kernel's first call in a new process; check numba's target."""
+    out = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True,
+                         text=True, check=True)
+    hits, misses, cpu = out.stdout.split()
+    assert cpu == str(target), cpu
+    return int(hits), int(misses)
+
+
+@pytest.mark.skipif(bool(os.environ.get("NUMBA_CACHE_DIR")), reason="NUMBA_CACHE_DIR wins")
+def test_a_prebuilt_set_loads_instead_of_compiling(tmp_path: Path) -> None:
+    """A set compiled for an x86-64 level is unpacked on first import and loaded, not compiled;
+    a set of other sources is left alone."""
+    from asrbf_mesh import _prebuilt
+
+    level = "x86-64-v3"
+    if not _prebuilt.LEVELS[level] <= _prebuilt.level_features():
+        pytest.skip(f"this processor cannot run {level} code")
+    base = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_", "ASRBF_"))}
+    built = tmp_path / "built"
+    env = dict(base, NUMBA_CPU_NAME=level, NUMBA_CPU_FEATURES=_prebuilt.FEATURES[level],
+               ASRBF_NO_PREBUILT="1",
+               ASRBF_CACHE_DIR=str(built))
+    assert _probe(env, level) == (0, 1)  # compiled for the level
+    sets = tmp_path / "sets"
+    _prebuilt.pack(built / f"kernels-{jc.source_key()}", sets, level, jc.source_key())
+    user = tmp_path / "user"
+    env = dict(base, ASRBF_PREBUILT_DIR=str(sets), ASRBF_CACHE_DIR=str(user))
+    assert _probe(env, level) == (1, 0)  # the shipped kernel, loaded; numba targets the level
+    marker = user / f"kernels-{jc.source_key()}" / _prebuilt.MARKER
+    assert marker.read_text().split()[0] == level
+    assert _probe(env, level) == (1, 0)  # and in every later process
+    assert _probe(dict(env, ASRBF_NO_PREBUILT="1")) == (0, 1)  # off: this machine's own code
+
+    manifest = sets / "manifest.json"
+    manifest.write_text(manifest.read_text().replace(jc.source_key(), "0" * 16))
+    other = tmp_path / "other"
+    env = dict(base, ASRBF_PREBUILT_DIR=str(sets), ASRBF_CACHE_DIR=str(other))
+    assert _probe(env) == (0, 1)  # another source version's set: compiled for this machine
+    marker = other / f"kernels-{jc.source_key()}" / _prebuilt.MARKER
+    assert marker.read_text().split()[0] == "none"
+    # a new manifest (the sets rebuilt for these sources) is judged again
+    manifest.write_text(manifest.read_text().replace("0" * 16, jc.source_key()))
+    _probe(env, level)
+    assert marker.read_text().split()[0] == level
