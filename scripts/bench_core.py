@@ -210,7 +210,7 @@ def speed(S) -> str:
             if clone == "two" and len(times) == 2:
                 first = json.loads(res.stdout)
         marks = Path(tmp, "kernels-two").rglob(".prebuilt")
-        level = "; ".join(sorted({m.read_text() for m in marks}))
+        level = "; ".join(sorted({m.read_text().split()[0] for m in marks}))
         cold, fresh, warm = times
     fit_s = json.loads(res.stdout)["fit_seconds"]
     lines.append(f"`asrbf fit` on the face map as a fresh process, a machine's very first run: "
