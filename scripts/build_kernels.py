@@ -8,8 +8,8 @@ used):
 
 For each x86-64 level (``asrbf_mesh._prebuilt.LEVELS``), a fresh per-user cache is filled
 by running, with numba targeting that level (``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES`` from
-``_prebuilt.FEATURES``), what a new user runs first: ``asrbf demo``, ``fit``, ``fill-holes``,
-``lod`` and ``reconstruct`` on the face map, plus every kernel a learning command needs
+``_prebuilt.FEATURES``), what a new user runs first: ``asrbf demo`` (a fit of the face map),
+``reconstruct``, ``fill-holes`` and ``lod`` on it, plus every kernel a learning command needs
 after learning (``python -m asrbf_mesh._warm``). The cache is packed as ``<level>.tar.xz``
 beside a ``manifest.json``. A command's kernels that no set holds compile on first use, as before.
 """
@@ -51,9 +51,8 @@ def build(level: str, workdir: Path) -> Path:
     out = workdir / f"{level}-out"
     cli = [py, "-m", "asrbf_mesh.cli"]
     _run([py, "-m", "asrbf_mesh._warm"], env)
-    _run(cli + ["demo", "-o", str(out / "demo")], env)
-    _run(cli + ["fit", face, "-o", str(out / "face.asrbf")], env)
-    _run(cli + ["reconstruct", str(out / "face.asrbf"), "-o", str(out / "face.ply"),
+    _run(cli + ["demo", "-o", str(out / "demo")], env)  # a fit of the face map and more
+    _run(cli + ["reconstruct", str(out / "demo" / "face.asrbf"), "-o", str(out / "face.ply"),
                 "--footprint", face], env)
     _run(cli + ["fill-holes", face, "-o", str(out / "filled.ply")], env)
     _run(cli + ["lod", face, "-o", str(out / "lod")], env)
@@ -66,9 +65,7 @@ def main() -> None:
     ap.add_argument("--levels", nargs="+", default=list(_prebuilt.LEVELS),
                     choices=list(_prebuilt.LEVELS))
     args = ap.parse_args()
-    dest = _prebuilt.ARCHIVES
-    for old in [*dest.glob("*.tar.xz"), dest / "manifest.json"]:
-        old.unlink(missing_ok=True)
+    dest = _prebuilt.ARCHIVES  # (pack keeps the manifest's other levels of these sources)
     with tempfile.TemporaryDirectory(prefix="asrbf-kernels-") as tmp:
         for level in args.levels:
             t0 = time.perf_counter()
