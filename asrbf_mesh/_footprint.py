@@ -192,9 +192,9 @@ def _label_bays(labels: np.ndarray, outside: frozenset[int], rho: float) -> np.n
         return labels
     # a bay is at least BAY_WIDTH times as wide as its mouth: a long gap between two parts
     # of the scan, a little wider here and there, is not one
-    ids = np.unique(core[inner])
-    widest = ndimage.maximum(edt, core, ids)
-    inner &= np.isin(core, ids[np.asarray(widest) >= _BAY_WIDTH * rho])
+    widest = np.zeros(n + 1)  # each core's widest inscribed disk (ndimage.maximum sorts
+    np.maximum.at(widest, core[inner], edt[inner])  # every label: 3 s on a Kinect frame)
+    inner &= widest[core] >= _BAY_WIDTH * rho
     if not inner.any():
         return labels
     reach = ndimage.distance_transform_edt(~(fits & ~inner)) <= rho  # the probe from beyond

@@ -25,13 +25,25 @@ class Hole:
     size: float
 
 
+def used_once(edges: np.ndarray) -> np.ndarray:
+    """Whether each of the (E, 2) vertex pairs ``edges`` occurs once, either way round.
+
+    One int64 key per undirected edge: ``np.unique(..., axis=0)`` on the pairs took 1.5 s
+    on a Kinect frame's 1.2 million half-edges, the keys 0.1 s.
+    """
+    if len(edges) == 0:
+        return np.zeros(0, dtype=bool)
+    e = np.sort(edges, axis=1).astype(np.int64)
+    key = e[:, 0] * (int(e[:, 1].max()) + 1) + e[:, 1]
+    _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return counts[inv.ravel()] == 1
+
+
 def boundary_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Edges used by exactly one face, and that face's third vertex."""
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     third = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]])
-    key = np.sort(e, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    once = counts[inv.ravel()] == 1
+    once = used_once(e)
     return e[once], third[once]
 
 

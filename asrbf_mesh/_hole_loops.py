@@ -24,6 +24,7 @@ from scipy.interpolate import RBFInterpolator
 from scipy.spatial import cKDTree
 
 from . import _holes_kernels as _hk
+from ._hole_find import used_once
 from ._hole_patch import away_from, grid_samples, triangulate
 
 __all__ = ["open_loops", "outer_loops", "split_loops", "boundary_cycles", "fill_loop",
@@ -41,9 +42,7 @@ def boundary_cycles(faces: np.ndarray) -> list[np.ndarray]:
     vertex with no way out (an inconsistently oriented patch) are dropped.
     """
     he = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = np.sort(he, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    bnd = he[counts[inv.ravel()] == 1]
+    bnd = he[used_once(he)]
     if len(bnd) == 0:
         return []
     order = np.lexsort((bnd[:, 1], bnd[:, 0]))

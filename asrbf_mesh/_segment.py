@@ -349,7 +349,8 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
             if len(inner) < _MIN_CLIFF_PAIRS:
                 continue
             own = np.flatnonzero(labels == piece)
-            side = _wrapped_side(local, own, graph, labels, anchor, inner, radius)
+            side = _wrapped_side(local, own, graph, labels, anchor,
+                                 _largest_cliff(local[:, :2], inner, radius))
             if side is not None:
                 new = int(labels.max()) + 1
                 labels[own[side]] = new
@@ -362,18 +363,17 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
 
 
 def _wrapped_side(local: np.ndarray, own: np.ndarray, graph, labels: np.ndarray,
-                  anchor: np.ndarray, jumps: np.ndarray, radius: float) -> np.ndarray | None:
+                  anchor: np.ndarray, jumps: np.ndarray) -> np.ndarray | None:
     """Boolean over ``own``: the lower side of its longest cliff, or None.
 
-    ``jumps`` are the piece's jump pairs (point indices), ``graph`` the triangles' edges
-    (CSR, 3D lengths), ``labels`` the pieces so far (a search stays in its piece) and
-    ``anchor`` each point's nearest point on a kept triangle (see :func:`_label`). None when
-    the longest cliff has fewer than ``_MIN_CLIFF_PAIRS`` pairs or the bisector would not
-    split the piece.
+    ``jumps`` are the jump pairs (point indices) of the piece's longest cliff
+    (:func:`_largest_cliff`), ``graph`` the triangles' edges (CSR, 3D lengths), ``labels``
+    the pieces so far (a search stays in its piece) and ``anchor`` each point's nearest
+    point on a kept triangle (see :func:`_label`). None when the cliff has fewer than
+    ``_MIN_CLIFF_PAIRS`` pairs or the bisector would not split the piece.
     """
     from ._segment_kernels import nearest_seed
 
-    jumps = _largest_cliff(local[:, :2], jumps, radius)
     if len(jumps) < _MIN_CLIFF_PAIRS:
         return None
     upper_first = local[jumps[:, 0], 2] > local[jumps[:, 1], 2]
@@ -397,14 +397,11 @@ def _wrapped_side(local: np.ndarray, own: np.ndarray, graph, labels: np.ndarray,
 
 
 def _largest_cliff(xy: np.ndarray, jumps: np.ndarray, radius: float) -> np.ndarray:
-    """Return the jump pairs of the longest cliff (pairs chained within ``_CLIFF_GAP`` radii)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    """Return the jump pairs of the longest cliff (pairs chained within ``_CLIFF_GAP`` radii).
 
-    mid = 0.5 * (xy[jumps[:, 0]] + xy[jumps[:, 1]])
-    near = cKDTree(mid).query_pairs(_CLIFF_GAP * radius, output_type="ndarray")
-    m = len(jumps)
-    graph = coo_matrix((np.ones(len(near)), (near[:, 0], near[:, 1])), shape=(m, m))
-    _, cliff = connected_components(graph, directed=False)
+    Of equally long cliffs, the one with the first pair.
+    """
+    from ._segment_kernels import close_components
+
+    cliff = close_components(0.5 * (xy[jumps[:, 0]] + xy[jumps[:, 1]]), _CLIFF_GAP * radius)
     return jumps[cliff == np.argmax(np.bincount(cliff))]

@@ -1,4 +1,4 @@
-"""Compiled helpers of segmentation (private): triangle shapes, edge lengths, jump pairs.
+"""Compiled helpers of segmentation (private): triangle shapes, edges, jumps, cliffs.
 
 :func:`triangle_shapes` and :func:`edge_lengths` measure what numpy measured in passes
 over (F, 3, 3) temporaries (its norm over a last axis of three is slow), with the same
@@ -215,6 +215,103 @@ def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump):
                             n += 1
         if sweep == 0:
             out = np.empty((n, 2), dtype=np.int64)
+    return out
+
+
+def close_components(xy: np.ndarray, gap: float) -> np.ndarray:
+    """(n,) int64: groups of the points ``xy`` chained by steps of at most ``gap``.
+
+    Single linkage at ``gap``: the connected components of the graph joining points
+    within ``gap`` of each other, numbered by their first point (as scipy's
+    ``connected_components`` numbers the graph's components). Union-find over a grid of
+    cells ``gap / sqrt(2)`` wide: the points of a cell are all within ``gap`` of each
+    other, and two cells up to two apart join at their first close pair. Listing every
+    close pair instead (``cKDTree.query_pairs``) gave 15 million pairs for a Kinect
+    frame's 69,000 jump pairs: 2.1 s of its 2.7 s segmentation.
+
+    Examples
+    --------
+    >>> close_components(np.array([[0.0, 0], [5, 0], [0.9, 0], [1.8, 0], [5.5, 0]]), 1.0).tolist()
+    [0, 1, 0, 0, 1]
+    """
+    pts = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
+    n = len(pts)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    if not (np.isfinite(pts).all() and gap > 0 and np.isfinite(gap)):
+        raise ValueError("close_components: points must be finite and gap > 0")
+    cell = gap / np.sqrt(2.0)
+    lo = pts.min(axis=0)
+    if not float(np.ptp(pts, axis=0).max()) / cell < 2**30:  # too many cells: list the pairs
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        from scipy.spatial import cKDTree
+
+        pairs = cKDTree(pts).query_pairs(gap, output_type="ndarray")
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        return connected_components(graph, directed=False)[1].astype(np.int64)
+    ij = np.floor((pts - lo) / cell).astype(np.int64)
+    key = ij[:, 0] * (2**32) + ij[:, 1]
+    order = np.argsort(key, kind="stable")
+    keys, start = np.unique(key[order], return_index=True)
+    start = np.append(start, n).astype(np.int64)
+    return _close_components(pts, float(gap) * float(gap), order, keys, start)
+
+
+@njit(cache=True, nogil=True)
+def _find(parent, a):
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@njit(cache=True, nogil=True)
+def _close_components(pts, g2, order, keys, start):
+    n = pts.shape[0]
+    parent = np.arange(n)
+    m = keys.shape[0]
+    for c in range(m):  # a cell's points are within gap of each other
+        first = order[start[c]]
+        for t in range(start[c] + 1, start[c + 1]):
+            ra, rb = _find(parent, first), _find(parent, order[t])
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)
+    for c in range(m):
+        cx, cy = keys[c] // (2**32), keys[c] % (2**32)
+        for dx in range(-2, 3):
+            for dy in range(-2, 3):
+                if dx < 0 or (dx == 0 and dy <= 0):  # each pair of cells once
+                    continue
+                nb = (cx + dx) * (2**32) + (cy + dy)
+                d = np.searchsorted(keys, nb)
+                if d >= m or keys[d] != nb:
+                    continue
+                if _find(parent, order[start[c]]) == _find(parent, order[start[d]]):
+                    continue
+                joined = False
+                for t in range(start[c], start[c + 1]):
+                    a = order[t]
+                    for u in range(start[d], start[d + 1]):
+                        b = order[u]
+                        ex = pts[a, 0] - pts[b, 0]
+                        ey = pts[a, 1] - pts[b, 1]
+                        if ex * ex + ey * ey <= g2:
+                            ra, rb = _find(parent, a), _find(parent, b)
+                            parent[max(ra, rb)] = min(ra, rb)
+                            joined = True
+                            break
+                    if joined:
+                        break
+    out = np.full(n, -1, dtype=np.int64)
+    label = np.full(n, -1, dtype=np.int64)
+    k = 0
+    for i in range(n):
+        r = _find(parent, i)
+        if label[r] < 0:
+            label[r] = k
+            k += 1
+        out[i] = label[r]
     return out
 
 

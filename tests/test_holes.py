@@ -458,3 +458,28 @@ def test_a_small_loop_takes_the_chords_the_mesh_lacks() -> None:
     assert len(t) == 2 and all({0, 2} <= set(tri.tolist()) for tri in t)
     both = np.array([1 * _KEY + 3, 0 * _KEY + 2])  # no diagonal left: nothing
     assert len(_chords_avoiding(loop, v, both)) == 0
+
+
+def test_the_edge_set_knows_the_mesh_edges_and_the_added_ones() -> None:
+    from asrbf_mesh._holes import _KEY, _edge_keys, _EdgeSet
+
+    faces = np.array([[0, 1, 2], [2, 1, 3]])
+    known = _EdgeSet(np.unique(_edge_keys(faces)))
+    probe = np.array([0 * _KEY + 1, 1 * _KEY + 2, 0 * _KEY + 3, 3 * _KEY + 4, 9 * _KEY + 10])
+    assert known.contains(probe).tolist() == [True, True, False, False, False]
+    known.add(_edge_keys(np.array([[3, 4, 0]])))
+    assert known.contains(probe).tolist() == [True, True, True, True, False]
+    assert known.contains(probe.reshape(5, 1)).shape == (5, 1)
+    assert not _EdgeSet(np.zeros(0, np.int64)).contains(probe).any()
+
+
+def test_edges_used_once_match_a_count_by_pairs() -> None:
+    from asrbf_mesh._hole_find import used_once
+
+    rng = np.random.default_rng(3)
+    e = rng.integers(0, 30, size=(400, 2))
+    e = e[e[:, 0] != e[:, 1]]
+    pairs = [tuple(sorted(p)) for p in e.tolist()]
+    expect = [pairs.count(p) == 1 for p in pairs]
+    assert used_once(e).tolist() == expect
+    assert used_once(np.zeros((0, 2), np.int64)).shape == (0,)

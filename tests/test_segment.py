@@ -187,3 +187,34 @@ def test_bad_parameters_raise_config_errors_naming_them(kw: dict, name: str) -> 
 def test_bad_points_raise_scan_errors(points) -> None:
     with pytest.raises(am.ScanError):
         am.segment(points)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_close_components_match_scipy_on_the_pairs_graph(seed: int) -> None:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    from asrbf_mesh._segment_kernels import close_components
+
+    rng = np.random.default_rng(seed)
+    xy = np.vstack([rng.uniform(0, 10, (300, 2)), rng.normal(3, 0.3, (200, 2))])
+    gap = 0.45
+    pairs = cKDTree(xy).query_pairs(gap, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(500, 500))
+    want = connected_components(graph, directed=False)[1]
+    got = close_components(xy, gap)
+    assert got.tolist() == want.tolist()
+    assert len(np.unique(got)) > 5  # the case has several components to tell apart
+
+
+def test_close_components_reject_bad_input() -> None:
+    from asrbf_mesh._segment_kernels import close_components
+
+    assert close_components(np.zeros((0, 2)), 1.0).shape == (0,)
+    with pytest.raises(ValueError):
+        close_components(np.array([[0.0, np.nan]]), 1.0)
+    with pytest.raises(ValueError):
+        close_components(np.zeros((3, 2)), 0.0)
+    far = np.array([[0.0, 0.0], [1e12, 0.0], [0.5, 0.0]])  # too many cells: the pairs
+    assert close_components(far, 1.0).tolist() == [0, 1, 0]
