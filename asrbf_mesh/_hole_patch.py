@@ -144,12 +144,93 @@ def _segments_through(pts: np.ndarray, seg: np.ndarray, points: np.ndarray,
 
 
 def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarray, np.ndarray]:
-    """Constrained triangulation; returns (triangles, vertices triangle had to add)."""
+    """Constrained triangulation; returns (triangles, vertices triangle had to add).
+
+    The one door to the ``triangle`` library, which crashes the process or raises from its
+    wrapper on input it cannot take: points all on one line (SIGSEGV), an empty segment
+    list with the ``p`` switch (IndexError; a rim whose every edge crossed another), fewer
+    than three points; copies of a point (exact, or within 1e-9 of the extent) joined by
+    segments, or a segment given twice (an endless loop). Those get no triangle here,
+    copies of a point are passed once (triangles use the first copy), and zero-length and
+    repeated segments are dropped; segments must index the points. Input triangle still
+    refuses (it raises) gets no triangle either.
+    """
     import triangle
 
-    res = triangle.triangulate({"vertices": pts, "segments": seg}, flags)
+    pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
+    seg = np.ascontiguousarray(seg, dtype=np.int64).reshape(-1, 2)
+    none = np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2))
+    if not np.isfinite(pts).all():
+        raise ValueError("triangulate: points must be finite")
+    if len(seg) and (seg.min() < 0 or seg.max() >= len(pts)):
+        raise ValueError("triangulate: a segment indexes no point")
+    if len(pts) < 3 or not _spans_area(pts):
+        return none
+    n = len(pts)
+    first = _first_copies(pts)
+    if first is not None:  # segments between copies of a point make triangle loop forever
+        keep = np.unique(first)
+        slot = np.full(n, -1, dtype=np.int64)
+        slot[keep] = np.arange(len(keep))
+        pts, seg = pts[keep], slot[first[seg]]
+    seg = seg[seg[:, 0] != seg[:, 1]]
+    if len(seg):
+        key = np.sort(seg, axis=1)
+        _, once = np.unique(key[:, 0] * n + key[:, 1], return_index=True)
+        if len(once) < len(seg):  # a segment given twice also loops forever
+            seg = seg[np.sort(once)]
+        data, switches = {"vertices": pts, "segments": seg}, flags
+    else:  # no constraint left: the points' own (convex hull) triangulation
+        data, switches = {"vertices": pts}, flags.replace("p", "").replace("c", "")
+    try:
+        res = triangle.triangulate(data, switches)
+    except (RuntimeError, ValueError, IndexError):  # "invalid geometry on input"
+        return none
     tris = np.asarray(res.get("triangles", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
-    return tris, np.asarray(res["vertices"])[len(pts):]
+    extra = np.asarray(res["vertices"])[len(pts):]
+    if first is not None:  # back to the caller's ids (the first copy; added vertices after)
+        tris = np.where(tris < len(keep), keep[np.minimum(tris, len(keep) - 1)],
+                        n + tris - len(keep))
+    return tris, extra
+
+
+#: Points closer than this share of the points' extent are copies of one point.
+_SAME_POINT = 1e-9
+
+
+def _first_copies(pts: np.ndarray) -> np.ndarray | None:
+    """Each point's first copy (smallest index of its group), or None if no two coincide.
+
+    Points closer than ``_SAME_POINT`` of the (n, 2) points' extent are copies.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    tol = _SAME_POINT * float(np.ptp(pts, axis=0).max())
+    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
+    if len(pairs) == 0:
+        return None
+    n = len(pts)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, group = connected_components(graph, directed=False)
+    lead = np.full(int(group.max()) + 1, n, dtype=np.int64)
+    np.minimum.at(lead, group, np.arange(n))
+    return lead[group]
+
+
+def _spans_area(pts: np.ndarray) -> bool:
+    """Whether the (n, 2) points are not all on one line (nor all one point), exactly.
+
+    Exact in floating point: some point lies off the line through the first point and
+    the point farthest from it (orientation test with a relative tolerance of 1e-12).
+    """
+    d = pts - pts[0]
+    far = int(np.argmax(np.abs(d).sum(axis=1)))
+    u = d[far]
+    if not np.any(u):
+        return False
+    cross = u[0] * d[:, 1] - u[1] * d[:, 0]
+    return bool(np.abs(cross).max() > 1e-12 * float(np.abs(u).max()) * float(np.abs(d).max()))
 
 
 def grid_samples(lo: np.ndarray, hi: np.ndarray, spacing: float) -> np.ndarray:

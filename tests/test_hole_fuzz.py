@@ -64,3 +64,62 @@ def test_fill_holes_never_crashes_and_reports_every_hole(kind: str, seed: int) -
     # every hole is filled or reported with its reason
     assert len(out["reasons"]) == out["found"] - out["filled"]
     assert all(isinstance(r, str) and r for r in out["reasons"])
+
+
+TRIANGULATE_CHILD = textwrap.dedent("""
+    import json, sys
+    import numpy as np
+    from asrbf_mesh._hole_patch import triangulate
+    rng = np.random.default_rng(int(sys.argv[1]))
+    out = []
+    for case in range(300):
+        n = int(rng.integers(1, 12))
+        kind = case % 6
+        if kind == 0:  # all on one line: triangle crashes (SIGSEGV)
+            t = rng.random(n)
+            p = np.c_[t, 2 * t + 1]
+        elif kind == 1:  # exact copies joined by segments: triangle loops forever
+            p = rng.random((n, 2))
+            p = np.vstack([p, p[: n // 2]])
+        elif kind == 2:  # copies 1e-15 apart: the same
+            p = rng.random((n, 2))
+            p = np.vstack([p, p[: n // 2] + 1e-15])
+        elif kind == 3:  # a lattice: collinear, overlapping segments
+            p = np.array([[i, j] for i in range(3) for j in range(3)], float)
+        elif kind == 4:  # one point many times
+            p = np.repeat(rng.random((1, 2)), n, axis=0)
+        else:
+            p = rng.random((n, 2))
+        m = len(p)
+        seg = rng.integers(0, m, size=(int(rng.integers(0, 2 * m + 1)), 2))
+        if case % 4 == 0:
+            seg = seg[:0]  # no segment with the p switch: an IndexError in triangle's wrapper
+        tris, extra = triangulate(p, seg, ["pYQ", "pcYQ", "pQ"][case % 3])
+        assert tris.ndim == 2 and tris.shape[1] == 3
+        assert len(tris) == 0 or tris.max() < m + len(extra)
+        out.append(len(tris))
+    print(json.dumps(out))
+""")
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_triangulate_takes_degenerate_input_without_crash_or_hang(seed: int) -> None:
+    proc = subprocess.run([sys.executable, "-c", TRIANGULATE_CHILD, str(seed)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr[-2000:]}"
+    counts = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert len(counts) == 300 and sum(c > 0 for c in counts) > 50  # most cases triangulate
+
+
+def test_triangulate_refuses_points_off_the_segments() -> None:
+    import numpy as np
+
+    from asrbf_mesh._hole_patch import triangulate
+
+    p = np.array([[0.0, 0], [1, 0], [0, 1]])
+    with pytest.raises(ValueError):
+        triangulate(p, np.array([[0, 3]]), "pQ")
+    with pytest.raises(ValueError):
+        triangulate(np.array([[0.0, 0], [1, np.nan], [0, 1]]), np.zeros((0, 2), int), "pQ")
+    tris, extra = triangulate(np.vstack([p, p[:1]]), np.array([[0, 1], [1, 2], [2, 3]]), "pQ")
+    assert len(tris) == 1 and set(tris[0].tolist()) == {0, 1, 2} and len(extra) == 0
