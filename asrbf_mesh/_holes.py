@@ -329,6 +329,49 @@ def _edge_keys(tris: np.ndarray) -> np.ndarray:
     return e[:, 0].astype(np.int64) * _KEY + e[:, 1]
 
 
+def _agree_with_scan(tris: np.ndarray, rim_keys: np.ndarray, inner_keys: np.ndarray
+                     ) -> tuple[np.ndarray, int]:
+    """Orient a patch the scan's way; drop the triangles that cannot join it consistently.
+
+    A patch is triangulated counter-clockwise in the view plane; where the scan folds over
+    itself its rim runs clockwise there (a back layer), and a patch joined to it that way
+    gives a rim edge two faces in one direction (an inconsistently oriented mesh: bun090,
+    punched with seeds 1 and 2). Each edge-connected part of the patch is flipped when
+    more of its edges run along a rim edge (``rim_keys``: the scan's boundary half-edges
+    ``a * 2**31 + b``, sorted) the scan's way than against it; then a triangle that still
+    runs a rim edge the scan's way, or lies on an edge two scan faces share
+    (``inner_keys``, undirected keys, sorted), is dropped. Returns the triangles and how
+    many were dropped.
+    """
+    if len(tris) == 0:
+        return tris, 0
+    he = np.stack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]], axis=1).astype(np.int64)
+    same = _in_sorted(he[..., 0] * _KEY + he[..., 1], rim_keys).sum(axis=1)
+    und = np.sort(he, axis=2)
+    third = _in_sorted(und[..., 0] * _KEY + und[..., 1], inner_keys).any(axis=1)
+    if not same.any() and not third.any():
+        return tris, 0
+    out = tris.copy()
+    if same.any():
+        against = _in_sorted(he[..., 1] * _KEY + he[..., 0], rim_keys).sum(axis=1)
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        _, edge = np.unique(und[..., 0].ravel() * _KEY + und[..., 1].ravel(),
+                            return_inverse=True)
+        t = len(tris)
+        tri = np.repeat(np.arange(t), 3)
+        graph = coo_matrix((np.ones(len(tri)), (tri, t + edge.ravel())),
+                           shape=(t + int(edge.max()) + 1,) * 2)
+        part = connected_components(graph, directed=False)[1][:t]
+        flip = (np.bincount(part, weights=same) > np.bincount(part, weights=against))[part]
+        out[flip] = out[flip][:, [0, 2, 1]]
+        fwd = out[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2).astype(np.int64)
+        same = _in_sorted(fwd[..., 0] * _KEY + fwd[..., 1], rim_keys).sum(axis=1)
+    bad = (same > 0) | third
+    return out[~bad], int(bad.sum())
+
+
 def _rim_keys(loop: np.ndarray) -> np.ndarray:
     """Keys of a loop's rim edges."""
     e = np.sort(np.column_stack([loop, np.roll(loop, -1)]), axis=1)
@@ -469,8 +512,12 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     holes, border, fp = find_holes(xy, faces, spacing, bay_mouth=BAY_MOUTH * spacing)
     area = signed_areas(xy, faces)
     ccw = bool(np.sum(area > 0) >= np.sum(area < 0))
+    rim_edges = boundary_edges(faces)[0]
     ctx = Ctx(xy, depth, net, faces, cKDTree(xy[faces].mean(axis=1)), cKDTree(xy), spacing,
-              ccw, fp.label_at, blend, lowpass_rel, boundary_edges(faces)[0])
+              ccw, fp.label_at, blend, lowpass_rel, rim_edges)
+    rim_keys = np.sort(rim_edges[:, 0].astype(np.int64) * _KEY + rim_edges[:, 1])
+    scan_keys, scan_uses = np.unique(_edge_keys(faces), return_counts=True)
+    inner_keys = scan_keys[scan_uses >= 2]  # a patch's triangle on one would make a third face
 
     new_pts: list[np.ndarray] = []
     new_tris: list[np.ndarray] = []
@@ -495,7 +542,14 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         if len(tris) == 0:
             infos.append(HoleInfo(**base, filled=False, reason=reason))
             continue
-        tris = np.where(tris < 0, n_base + n_new - tris - 1, tris)
+        tris, clash = _agree_with_scan(np.where(tris < 0, n_base + n_new - tris - 1, tris),
+                                       rim_keys, inner_keys)
+        if clash and reason is None:  # the loop stage closes what is left, in 3D
+            reason = (f"{clash} triangles would have run against the scan's orientation or "
+                      "given a scan edge a third face")
+        if len(tris) == 0:
+            infos.append(HoleInfo(**base, filled=False, reason=reason))
+            continue
         new_pts.append(verts)
         new_tris.append(tris)
         n_new += len(verts)

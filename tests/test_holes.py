@@ -483,3 +483,25 @@ def test_edges_used_once_match_a_count_by_pairs() -> None:
     expect = [pairs.count(p) == 1 for p in pairs]
     assert used_once(e).tolist() == expect
     assert used_once(np.zeros((0, 2), np.int64)).shape == (0,)
+
+
+def test_a_patch_turns_to_the_scans_orientation_and_drops_clashing_triangles() -> None:
+    from asrbf_mesh._hole_find import boundary_edges
+    from asrbf_mesh._holes import _KEY, _agree_with_scan, _edge_keys
+
+    scan = np.array([[0, 1, 2]])  # one scan triangle: rim edges 0->1, 1->2, 2->0
+    rim = boundary_edges(scan)[0]
+    rim_keys = np.sort(rim[:, 0].astype(np.int64) * _KEY + rim[:, 1])
+    none = np.zeros(0, np.int64)
+    # a patch across the rim edge 1-2 running it the scan's way (1 -> 2): turned round
+    patch = np.array([[1, 2, 3], [3, 2, 4]])
+    out, dropped = _agree_with_scan(patch, rim_keys, none)
+    assert dropped == 0 and out.tolist() == [[1, 3, 2], [3, 4, 2]]
+    # the right way round already: untouched, the same object
+    assert _agree_with_scan(out, rim_keys, none)[0] is out
+    # a triangle on an edge two scan faces share would give it a third face: dropped
+    two = np.array([[0, 1, 2], [2, 1, 5]])
+    keys, uses = np.unique(_edge_keys(two), return_counts=True)
+    out, dropped = _agree_with_scan(np.array([[1, 2, 6], [6, 2, 7]]),
+                                    np.zeros(0, np.int64), keys[uses >= 2])
+    assert dropped == 1 and out.tolist() == [[6, 2, 7]]
