@@ -201,20 +201,15 @@ _SAME_POINT = 1e-9
 def _first_copies(pts: np.ndarray) -> np.ndarray | None:
     """Each point's first copy (smallest index of its group), or None if no two coincide.
 
-    Points closer than ``_SAME_POINT`` of the (n, 2) points' extent are copies.
+    Points chained closer than ``_SAME_POINT`` of the (n, 2) points' extent are copies.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from ._segment_kernels import close_components
 
-    tol = _SAME_POINT * float(np.ptp(pts, axis=0).max())
-    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
-    if len(pairs) == 0:
+    group = close_components(pts, _SAME_POINT * float(np.ptp(pts, axis=0).max()))
+    if group.max() == len(pts) - 1:  # every point a group of its own
         return None
-    n = len(pts)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, group = connected_components(graph, directed=False)
-    lead = np.full(int(group.max()) + 1, n, dtype=np.int64)
-    np.minimum.at(lead, group, np.arange(n))
+    lead = np.full(int(group.max()) + 1, len(pts), dtype=np.int64)
+    np.minimum.at(lead, group, np.arange(len(pts)))
     return lead[group]
 
 

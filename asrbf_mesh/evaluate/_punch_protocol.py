@@ -35,7 +35,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .._frame import sampling_spacing
@@ -151,13 +150,10 @@ def _holes(truth: np.ndarray, punched: Scan, xy: np.ndarray, diagonal: float,
     """Group truth points into holes; flag the holes that are not notches of the border."""
     if len(truth) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
-    link = 3.0 * sampling_spacing(xy)
-    pairs = cKDTree(truth[:, :2]).query_pairs(link, output_type="ndarray")
-    from scipy.sparse import coo_matrix
+    from .._segment_kernels import close_components
 
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
-                       shape=(len(truth), len(truth)))
-    n, hole = connected_components(graph, directed=False)
+    hole = close_components(truth[:, :2], 3.0 * sampling_spacing(xy))
+    n = int(hole.max()) + 1
     if border == "igl":
         loops = boundary_loops(punched.faces)
         outer = [max(loops, key=len)] if loops else []
