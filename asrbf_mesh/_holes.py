@@ -372,6 +372,29 @@ def _agree_with_scan(tris: np.ndarray, rim_keys: np.ndarray, inner_keys: np.ndar
     return out[~bad], int(bad.sum())
 
 
+def _closed_after_all(clashed: dict[int, np.ndarray], infos: list[HoleInfo],
+                      faces: np.ndarray, n_vertices: int) -> None:
+    """Mark filled the holes whose dropped triangles left no gap (updates ``infos``).
+
+    The triangles :func:`_agree_with_scan` drops often leave nothing open: they lay over
+    triangles the scan or the patch already has (a layer's patch beside a fold), or would
+    have closed an edge of the outer border, which stays open anyway (bun180 punched with
+    seed 5: 4 triangles dropped, every rim edge of its hole shared by two faces). A hole
+    is filled when none of its rim edges and none of its patch's edges (``clashed``: their
+    keys) is still a boundary edge of the result, but on a part's outer border.
+    """
+    from ._hole_loops import outer_loops
+
+    keys, count = np.unique(_edge_keys(faces), return_counts=True)
+    still_open = keys[count == 1]
+    outer = [_rim_keys(loop) for loop in outer_loops(faces, n_vertices)]
+    if outer:
+        still_open = np.setdiff1d(still_open, np.concatenate(outer))
+    for i, edge_keys in clashed.items():
+        if not infos[i].filled and not _in_sorted(edge_keys, still_open).any():
+            infos[i] = dataclasses.replace(infos[i], filled=True, reason=None)
+
+
 def _rim_keys(loop: np.ndarray) -> np.ndarray:
     """Keys of a loop's rim edges."""
     e = np.sort(np.column_stack([loop, np.roll(loop, -1)]), axis=1)
@@ -523,6 +546,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     new_tris: list[np.ndarray] = []
     infos: list[HoleInfo] = []
     rims: list[set[int]] = []
+    clashed: dict[int, np.ndarray] = {}  # info index -> rim and patch edge keys
     n_base = len(scan.points)
     n_new = 0
     for i, h in enumerate(holes):
@@ -542,11 +566,13 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         if len(tris) == 0:
             infos.append(HoleInfo(**base, filled=False, reason=reason))
             continue
-        tris, clash = _agree_with_scan(np.where(tris < 0, n_base + n_new - tris - 1, tris),
-                                       rim_keys, inner_keys)
+        placed = np.where(tris < 0, n_base + n_new - tris - 1, tris)
+        tris, clash = _agree_with_scan(placed, rim_keys, inner_keys)
         if clash and reason is None:  # the loop stage closes what is left, in 3D
             reason = (f"{clash} triangles would have run against the scan's orientation or "
                       "given a scan edge a third face")
+            e = np.sort(h.edges, axis=1).astype(np.int64)
+            clashed[len(infos)] = np.r_[e[:, 0] * _KEY + e[:, 1], _edge_keys(placed)]
         if len(tris) == 0:
             infos.append(HoleInfo(**base, filled=False, reason=reason))
             continue
@@ -561,6 +587,8 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     all_faces = np.vstack([faces, *new_tris]) if new_tris else faces
     vertices, all_faces, border = _close_loops(vertices, all_faces, infos, rims,
                                                scan.points, R, spacing, limit, diag)
+    if clashed:
+        _closed_after_all(clashed, infos, all_faces, len(vertices))
     quality = np.r_[np.zeros(n_base), np.ones(len(vertices) - n_base)]
     mesh = Mesh(vertices, all_faces, vertex_quality=quality)
     return FillResult(mesh, tuple(infos), border, time.perf_counter() - t0, net)

@@ -11,7 +11,13 @@ triangulation of its footprint in the view plane, :func:`point_cloud_faces`):
 1. a triangle is *cut* when it is seen nearly edge-on, ``|n . view| < cos(wall_angle)``
    (its slope exceeds ``tan(wall_angle)``; 80 degrees is ``|n . view| < 0.17``), when its
    longest edge exceeds ``jump_factor`` times the median edge length of the scan, or when
-   it has no area. Angles and lengths are measured in the scan's own units, rotated into
+   it has no area; but a triangle (or, in rule 4, a pair) whose depth extent is below the
+   *minimum step* is never cut: 1 % of the scan's depth extent (between its 1st and
+   99th percentiles; the default fit's error threshold E, so a smaller step is within
+   what the network smooths anyway), or 2.5 depth quanta where the depths come in
+   levels (a depth camera's disparity steps, read from the gaps between the distinct
+   depth values around the triangle's depth). Angles and lengths are measured in the
+   scan's own units, rotated into
    the view frame: the axes share one unit, so a slope is a physical slope (the unit cube
    of :func:`~asrbf_mesh.to_height_field` scales depth and plane differently);
 2. the pieces are the connected components of the kept triangles' edges;
@@ -43,6 +49,13 @@ parts (one of 83,000 points, 97 %), each bunny scan 8 to 13 pieces with 1 to 3 l
 and still split bun090 at its occlusion cliffs (17,259, 9,366 and 3,217 points). Wider
 settings (85 degrees, 8 edges) merge two of bun090's pieces across a cliff.
 
+The minimum step was added for depth-camera frames in metric coordinates (TUM RGB-D,
+meshed with their intrinsics): the Kinect's depth quantum grows with the square of the
+depth (about 3 cm at 3 m), its one-level risers are steeper than the wall angle and
+longer than 5 median edges, and they cut a frame into 1,189 pieces (866 small) with
+64,885 of its 397,101 triangles cut; with the minimum step, 95 pieces and 5,146 cut.
+It changes no piece of the five dev scans (their steps are far above it).
+
 Rule 4 was added when the reconstruction's tails were traced (``scripts/bench_pieces.py``):
 bun090's 9,366-point piece held 125 such jump pairs, its worst residuals (up to 0.15 of
 the unit depth) sat on the ramp the network put across the cliff, and the mesh's 99.9th
@@ -63,7 +76,8 @@ from . import _config
 from ._validate import check_choice, check_float, check_int, check_points, plural, readonly
 from .errors import ScanError
 
-__all__ = ["Segmentation", "segment", "WALL_ANGLE_DEG", "JUMP_FACTOR", "MIN_PIECE_POINTS"]
+__all__ = ["Segmentation", "segment", "WALL_ANGLE_DEG", "JUMP_FACTOR", "MIN_PIECE_POINTS",
+           "MIN_STEP_REL"]
 
 #: Triangles steeper than this (degrees between the normal and the view axis) are cut.
 WALL_ANGLE_DEG = 80.0
@@ -71,6 +85,16 @@ WALL_ANGLE_DEG = 80.0
 JUMP_FACTOR = 5.0
 #: Pieces with fewer points are flagged small.
 MIN_PIECE_POINTS = 30
+#: Default minimum step: depth steps below this fraction of the robust depth extent are
+#: never cut (the default fit's E).
+MIN_STEP_REL = 0.01
+#: Where depths come in levels, steps below this many depth quanta are never cut.
+_QUANTA = 2.5
+#: Depths come in levels (quanta) when there are at least this many distinct values and
+#: at most one per two points.
+_MIN_LEVELS = 64
+#: The depth quantum at a level: the median gap over this many neighbouring levels.
+_QUANTUM_WINDOW = 9
 #: Jump pairs are looked for within this many view-plane sampling spacings (rule 4).
 _PAIR_SPACINGS = 2.0
 #: Rule 4: points sampled for the view-plane spacing (its median, to 1 % on any scan here).
@@ -109,6 +133,8 @@ class Segmentation:
         Triangles considered and triangles cut.
     n_split : int
         Pieces split because they wrapped around the end of a cliff (rule 4).
+    min_step : float
+        The minimum step used (scan units; depth quanta may raise it locally).
     """
 
     labels: np.ndarray
@@ -122,6 +148,7 @@ class Segmentation:
     n_triangles: int
     n_cut: int
     n_split: int = 0
+    min_step: float = 0.0
 
     def __post_init__(self) -> None:
         """Freeze the arrays and check that they agree."""
@@ -163,6 +190,7 @@ class Segmentation:
             "n_triangles": self.n_triangles,
             "n_cut": self.n_cut,
             "n_split": self.n_split,
+            "min_step": self.min_step,
             "view_axis": self.view_axis,
             "wall_angle_deg": self.wall_angle_deg,
             "jump_factor": self.jump_factor,
@@ -174,11 +202,45 @@ class Segmentation:
                 f"{plural(self.n_pieces, 'piece')}, {int(self.small.sum())} small)")
 
 
+class _Steps:
+    """The minimum depth step that may be cut, at any depth (see the module text)."""
+
+    def __init__(self, depth: np.ndarray, min_step: float | None) -> None:
+        self.levels = self.quanta = None
+        if min_step is not None:  # the caller's step, exactly
+            self.floor = float(min_step)
+            return
+        lo, hi = np.percentile(depth, [1.0, 99.0]) if len(depth) else (0.0, 0.0)
+        self.floor = MIN_STEP_REL * float(hi - lo)
+        levels = np.unique(depth)
+        # a few levels are the scene's own (a cliff between two flat terraces), not quanta
+        if len(levels) < _MIN_LEVELS or len(levels) > len(depth) // 2:
+            return
+        from scipy.ndimage import median_filter
+
+        self.levels = levels
+        self.quanta = _QUANTA * median_filter(np.diff(levels), size=_QUANTUM_WINDOW,
+                                              mode="nearest")
+
+    def at(self, depth: np.ndarray) -> np.ndarray | float:
+        """The minimum step for a step starting at ``depth`` (its lower end)."""
+        if self.quanta is None:
+            return self.floor
+        i = np.minimum(np.searchsorted(self.levels, depth), len(self.quanta) - 1)
+        return np.maximum(self.floor, self.quanta[i])
+
+    def keep(self, za: np.ndarray, zb: np.ndarray) -> np.ndarray:
+        """Whether each step from ``za`` to ``zb`` is large enough to be cut."""
+        return np.abs(za - zb) > self.at(np.minimum(za, zb))
+
+
 def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
-                   jump_factor: float) -> tuple[np.ndarray, float]:
+                   jump_factor: float, steps: _Steps | None = None
+                   ) -> tuple[np.ndarray, float]:
     """Return the cut triangles, (F,) bool, and the median edge length.
 
-    A triangle is cut when it is seen nearly edge-on, too long, or without area.
+    A triangle is cut when it is seen nearly edge-on or too long, and its depth extent
+    is a step (``steps``), or when it has no area.
     """
     from ._segment_kernels import triangle_shapes
 
@@ -187,12 +249,16 @@ def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
     with np.errstate(invalid="ignore", divide="ignore"):
         facing = np.abs(nz) / area2
     median = float(np.median(length)) if length.size else 0.0
-    cut = ~(area2 > 0) | ~(facing >= math.cos(math.radians(wall_angle_deg)))
+    cut = ~(facing >= math.cos(math.radians(wall_angle_deg)))
     if median > 0:
         # the longest edge (numpy's max over a short axis is 10x slower than this)
         longest = np.maximum(np.maximum(length[:, 0], length[:, 1]), length[:, 2])
         cut |= longest > jump_factor * median
-    return cut, median
+    if steps is not None and cut.any():
+        at = np.flatnonzero(cut)
+        z = local[faces[at], 2]
+        cut[at] = steps.keep(z.min(axis=1), z.max(axis=1))
+    return cut | ~(area2 > 0), median
 
 
 def _components(n: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -211,8 +277,8 @@ def _stable(labels: np.ndarray) -> np.ndarray:
 
 
 def segment(scan: Any, *, view_axis: str = "z", wall_angle_deg: float = WALL_ANGLE_DEG,
-            jump_factor: float = JUMP_FACTOR,
-            min_piece_points: int = MIN_PIECE_POINTS) -> Segmentation:
+            jump_factor: float = JUMP_FACTOR, min_piece_points: int = MIN_PIECE_POINTS,
+            min_step: float | None = None) -> Segmentation:
     """Cut a scan into pieces that are each a smooth height field along ``view_axis``.
 
     Parameters
@@ -230,6 +296,11 @@ def segment(scan: Any, *, view_axis: str = "z", wall_angle_deg: float = WALL_ANG
         cut (depth jumps, bridged gaps); > 1.
     min_piece_points : int
         Pieces with fewer points are flagged ``small``; >= 1.
+    min_step : float, optional
+        Depth steps up to this size (scan units) are never cut, walls and jumps alike.
+        Default: 1 % of the scan's depth extent (between its 1st and 99th percentiles),
+        and where the depths come in levels (a depth camera's quanta) at least 2.5
+        levels. A number is used as it is: 0 cuts every step.
 
     Returns
     -------
@@ -256,6 +327,8 @@ def segment(scan: Any, *, view_axis: str = "z", wall_angle_deg: float = WALL_ANG
                                  low_open=True)
     jump_factor = check_float(jump_factor, "jump_factor", low=1.0, low_open=True)
     min_piece_points = check_int(min_piece_points, "min_piece_points", 1)
+    if min_step is not None:
+        min_step = check_float(min_step, "min_step", low=0.0)
     pts = check_points(scan, "points", min_points=1)
     faces = getattr(scan, "faces", None)
     faces = None if faces is None else np.asarray(faces, dtype=np.int64).reshape(-1, 3)
@@ -267,14 +340,15 @@ def segment(scan: Any, *, view_axis: str = "z", wall_angle_deg: float = WALL_ANG
     if faces is None or len(faces) == 0:
         source = "cloud"
         faces = _cloud_faces(local)
-    cut, median = _cut_triangles(local, faces, wall_angle_deg, jump_factor)
+    steps = _Steps(local[:, 2], min_step)
+    cut, median = _cut_triangles(local, faces, wall_angle_deg, jump_factor, steps)
     labels, anchor = _label(local, faces[~cut])
     labels, n_split = _split_wrapped(local, faces, labels, anchor, wall_angle_deg,
-                                     jump_factor * median)
+                                     jump_factor * median, steps)
     sizes = np.bincount(labels)
     return Segmentation(labels, sizes, sizes < min_piece_points, view_axis, wall_angle_deg,
                         jump_factor, min_piece_points, source, int(len(faces)),
-                        int(cut.sum()), n_split)
+                        int(cut.sum()), n_split, steps.floor)
 
 
 def _cloud_faces(local: np.ndarray) -> np.ndarray:
@@ -313,8 +387,8 @@ def _label(local: np.ndarray, kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
-                   anchor: np.ndarray, wall_angle_deg: float,
-                   jump: float) -> tuple[np.ndarray, int]:
+                   anchor: np.ndarray, wall_angle_deg: float, jump: float,
+                   steps: _Steps | None = None) -> tuple[np.ndarray, int]:
     """Rule 4: split the pieces that wrap around the end of a cliff; (labels, splits).
 
     The searches run along every triangle's edges within a piece, the cut ones too: the
@@ -334,6 +408,8 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
         return labels, 0
     slope = math.tan(math.radians(min(wall_angle_deg, 89.9)))
     jumps = jump_pairs(local, radius, slope, jump)  # close in the view plane, far in depth
+    if steps is not None and len(jumps):
+        jumps = jumps[steps.keep(local[jumps[:, 0], 2], local[jumps[:, 1], 2])]
     if len(jumps) < _MIN_CLIFF_PAIRS:
         return labels, 0
     n = len(local)

@@ -505,3 +505,27 @@ def test_a_patch_turns_to_the_scans_orientation_and_drops_clashing_triangles() -
     out, dropped = _agree_with_scan(np.array([[1, 2, 6], [6, 2, 7]]),
                                     np.zeros(0, np.int64), keys[uses >= 2])
     assert dropped == 1 and out.tolist() == [[6, 2, 7]]
+
+
+def test_a_hole_whose_dropped_triangles_left_no_gap_counts_as_filled() -> None:
+    from asrbf_mesh._holes import HoleInfo, _closed_after_all, _edge_keys
+
+    # a 4 x 4 grid of cells, each cut into two triangles; cell (1, 1) punched out
+    ij = np.arange(25).reshape(5, 5)
+    cells = [(i, j) for i in range(4) for j in range(4)]
+    tri = [t for i, j in cells for t in ([ij[i, j], ij[i + 1, j], ij[i + 1, j + 1]],
+                                          [ij[i, j], ij[i + 1, j + 1], ij[i, j + 1]])]
+    full = np.array(tri)
+    holed = np.array([t for (i, j), t in zip(np.repeat(cells, 2, axis=0).tolist(), tri,
+                                             strict=True) if (i, j) != (1, 1)])
+    cell = _edge_keys(np.array(tri[2 * 5: 2 * 5 + 2]))  # the edges of cell (1, 1)
+    border = _edge_keys(full[:2])  # a corner cell: two of its edges on the outer border
+
+    def run(faces: np.ndarray, keys: np.ndarray) -> bool:
+        infos = [HoleInfo(0, 1.0, 1.0, (0.0, 0.0, 0.0), 4, False, "2 triangles would ...")]
+        _closed_after_all({0: keys}, infos, faces, 25)
+        return infos[0].filled
+
+    assert run(full, cell)  # every edge shared by two faces: closed
+    assert not run(holed, cell)  # the cell's rim is still open: a gap
+    assert run(holed, border)  # open edges on the outer border only: closed

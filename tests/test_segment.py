@@ -218,3 +218,28 @@ def test_close_components_reject_bad_input() -> None:
         close_components(np.zeros((3, 2)), 0.0)
     far = np.array([[0.0, 0.0], [1e12, 0.0], [0.5, 0.0]])  # too many cells: the pairs
     assert close_components(far, 1.0).tolist() == [0, 1, 0]
+
+
+def quantised_ramp() -> tuple[np.ndarray, np.ndarray]:
+    """A gentle ramp (slope 0.4) whose depths come in levels 8 apart, as a depth camera's:
+    a riser every 20 columns, steeper than the wall angle and longer than 5 median edges."""
+    return height_grid(lambda x, y: np.round(0.4 * x / 8.0) * 8.0, 2000, 3,
+                       x=(0.0, 1999.0), y=(0.0, 2.0))
+
+
+def test_steps_of_a_few_depth_quanta_are_not_cut() -> None:
+    pts, faces = quantised_ramp()
+    seg = am.segment(am.Scan(pts, faces))
+    assert seg.n_pieces == 1 and seg.n_cut == 0
+    every = am.segment(am.Scan(pts, faces), min_step=0.0)  # each riser cut
+    assert every.n_pieces == 101 and every.n_cut > 0
+    assert seg.to_dict()["min_step"] == pytest.approx(0.01 * float(np.ptp(np.percentile(
+        pts[:, 2], [1, 99]))))
+
+
+def test_a_cliff_below_the_minimum_step_is_not_cut() -> None:
+    pts, faces = grid(cliff)
+    assert am.segment(am.Scan(pts, faces), min_step=9.0).n_pieces == 2
+    assert am.segment(am.Scan(pts, faces), min_step=15.0).n_pieces == 1
+    with pytest.raises(am.ConfigError, match="min_step"):
+        am.segment(pts, min_step=-1.0)
