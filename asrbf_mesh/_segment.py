@@ -223,7 +223,7 @@ class _Steps:
                                               mode="nearest")
 
     def at(self, depth: np.ndarray) -> np.ndarray | float:
-        """The minimum step for a step starting at ``depth`` (its lower end)."""
+        """Return the minimum step for a step starting at ``depth`` (its lower end)."""
         if self.quanta is None:
             return self.floor
         i = np.minimum(np.searchsorted(self.levels, depth), len(self.quanta) - 1)
