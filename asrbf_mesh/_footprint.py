@@ -197,13 +197,27 @@ def _label_bays(labels: np.ndarray, outside: frozenset[int], rho: float) -> np.n
     inner &= widest[core] >= _BAY_WIDTH * rho
     if not inner.any():
         return labels
-    reach = ndimage.distance_transform_edt(~(fits & ~inner)) <= rho  # the probe from beyond
-    dist, (ii, jj) = ndimage.distance_transform_edt(~inner, return_indices=True)
-    bay = out & ~reach & (dist <= rho + 2.0)
+    # the bays lie within rho + 2 cells of the inner cores, and what decides them within
+    # rho more: the two transforms below run on that window only (a Kinect frame's raster
+    # of 16 million cells spent 2.2 s on them whole)
+    ij = np.argwhere(inner)
+    m = int(np.ceil(2.0 * rho)) + 4
+    a = np.maximum(ij.min(axis=0) - m, 0)
+    b = np.minimum(ij.max(axis=0) + m + 1, out.shape)
+    win = (slice(a[0], b[0]), slice(a[1], b[1]))
+    w_inner = inner[win]
+    probe = fits[win] & ~w_inner  # where the probe from beyond fits
+    # (with no such cell the transform would measure to a phantom one beyond the corner)
+    reach = ndimage.distance_transform_edt(~probe) <= rho if probe.any() \
+        else np.zeros_like(probe)
+    dist, (ii, jj) = ndimage.distance_transform_edt(~w_inner, return_indices=True)
+    bay = np.zeros_like(out)
+    bay[win] = out[win] & ~reach & (dist <= rho + 2.0)
+    bay_core = np.zeros_like(core)
+    bay_core[win] = core[win][ii, jj]
     new = labels.copy()
     sl = (slice(pad, -pad), slice(pad, -pad))
-    bay_core = core[ii, jj][sl]
     mask = bay[sl]
-    ids, inv = np.unique(bay_core[mask], return_inverse=True)
+    ids, inv = np.unique(bay_core[sl][mask], return_inverse=True)
     new[mask] = int(labels.max()) + 1 + inv.ravel()
     return new

@@ -298,6 +298,9 @@ def _residual_spline(ctx: Ctx, ring: np.ndarray, fnet: Network, centre: np.ndarr
 _MIN_NZ = 0.15
 _FLAT = 0.5
 _FILL_REL = 0.18
+#: A view ray's secant search stops once it is this close to the surface (x hole size);
+#: a ray that ends farther than 1e-6 x the hole size missed it.
+_SECANT_DONE = 1e-10
 
 
 def _plane_depth(ctx: Ctx, ring: np.ndarray, centre: np.ndarray, size: float):
@@ -329,19 +332,27 @@ def _plane_depth(ctx: Ctx, ring: np.ndarray, centre: np.ndarray, size: float):
         return None
 
     def depth(q: np.ndarray) -> np.ndarray:
-        def F(z: np.ndarray) -> np.ndarray:
-            p = np.column_stack([q, z]) - c
+        def F(at: np.ndarray, z: np.ndarray) -> np.ndarray:
+            p = np.column_stack([q[at], z]) - c
             return p @ n - size * spline(p @ axes.T / size)
 
+        every = np.arange(len(q))
         z0 = c[2] - ((q - c[:2]) @ n[:2]) / n[2]
         z1 = z0 + 0.01 * size
-        f0, f1 = F(z0), F(z1)
+        f0, f1 = F(every, z0), F(every, z1)
+        # secant steps for the points not yet on the surface (each spline evaluation
+        # costs a ring's worth of kernel terms per point: the points done are left out)
+        todo = every[np.abs(f1) > _SECANT_DONE * size]
         for _ in range(8):
-            den = f1 - f0
+            if len(todo) == 0:
+                break
+            a0, a1, g0, g1 = z0[todo], z1[todo], f0[todo], f1[todo]
+            den = g1 - g0
             ok = np.abs(den) > 1e-300
-            z2 = np.where(ok, z1 - f1 * (z1 - z0) / np.where(ok, den, 1.0), z1)
-            z0, f0 = z1, f1
-            z1, f1 = z2, F(z2)
+            a2 = np.where(ok, a1 - g1 * (a1 - a0) / np.where(ok, den, 1.0), a1)
+            z0[todo], f0[todo] = a1, g1
+            z1[todo], f1[todo] = a2, F(todo, a2)
+            todo = todo[np.abs(f1[todo]) > _SECANT_DONE * size]
         return np.where(np.abs(f1) <= 1e-6 * size, z1, np.nan)
 
     return depth

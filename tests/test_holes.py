@@ -529,3 +529,59 @@ def test_a_hole_whose_dropped_triangles_left_no_gap_counts_as_filled() -> None:
     assert run(full, cell)  # every edge shared by two faces: closed
     assert not run(holed, cell)  # the cell's rim is still open: a gap
     assert run(holed, border)  # open edges on the outer border only: closed
+
+
+def _bays_whole_raster(labels, outside, rho):
+    """The bay labelling with every distance transform over the whole raster (reference)."""
+    from scipy import ndimage
+
+    from asrbf_mesh._footprint import _BAY_WIDTH
+
+    pad = int(np.ceil(rho)) + 2
+    out = np.pad(np.isin(labels, list(outside)), pad, constant_values=True)
+    edt = ndimage.distance_transform_edt(out)
+    fits = edt > rho
+    core, n = ndimage.label(fits, structure=np.ones((3, 3), bool))
+    beyond = np.unique(np.concatenate([core[0], core[-1], core[:, 0], core[:, -1]]))
+    inner = fits & ~np.isin(core, beyond)
+    widest = np.zeros(n + 1)
+    np.maximum.at(widest, core[inner], edt[inner])
+    inner &= widest[core] >= _BAY_WIDTH * rho
+    if not inner.any():
+        return labels
+    reach = ndimage.distance_transform_edt(~(fits & ~inner)) <= rho
+    dist, (ii, jj) = ndimage.distance_transform_edt(~inner, return_indices=True)
+    bay = out & ~reach & (dist <= rho + 2.0)
+    new = labels.copy()
+    sl = (slice(pad, -pad), slice(pad, -pad))
+    mask = bay[sl]
+    _, inv = np.unique(core[ii, jj][sl][mask], return_inverse=True)
+    new[mask] = int(labels.max()) + 1 + inv.ravel()
+    return new
+
+
+@pytest.mark.parametrize("case", range(6))
+def test_bays_found_in_a_window_match_the_whole_raster(case: int) -> None:
+    """The bays' distance transforms run on a window around them: the same labels."""
+    from scipy import ndimage
+
+    from asrbf_mesh._footprint import _label_bays
+
+    rng = np.random.default_rng(case)
+    y, x = np.mgrid[0:120, 0:160]
+    covered = np.ones((120, 160), bool)
+    covered[:, :6] = covered[:, -6:] = covered[:6] = covered[-6:] = False  # the outside
+    for _ in range(3):  # disks behind narrow or wide slits to the outside
+        cy, cx, r = rng.integers(30, 90), rng.integers(35, 125), rng.integers(8, 22)
+        covered &= np.hypot(y - cy, x - cx) >= r
+        w = int(rng.integers(1, 12))
+        covered[cy - w // 2: cy + w // 2 + 1, cx:] = False if case % 2 else covered[
+            cy - w // 2: cy + w // 2 + 1, cx:]
+        if case % 2 == 0:
+            covered[cy:, cx - w // 2: cx + w // 2 + 1] = False
+    labels, _ = ndimage.label(~covered, structure=np.ones((3, 3), bool))
+    outside = frozenset(np.unique(np.concatenate(
+        [labels[0], labels[-1], labels[:, 0], labels[:, -1]])).tolist()) - {0}
+    for rho in (3.0, 5.5, 8.0):
+        np.testing.assert_array_equal(_label_bays(labels, outside, rho),
+                                      _bays_whole_raster(labels, outside, rho))
