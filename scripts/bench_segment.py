@@ -64,9 +64,13 @@ def main(argv: list[str] | None = None) -> int:
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_segment.py` ({time.perf_counter() - t0:.0f} s)._\n\n"
             "`am.segment` cuts the triangles seen nearly edge-on (|n·view| < cos(wall angle)) "
-            "or with a longest edge over the jump factor × the median edge; connected "
+            "or with a longest edge over the jump factor × the median edge, when their "
+            "depth extent is over the minimum step (default: 1 % of the robust depth "
+            "extent, and 2.5 depth quanta where depths come in levels); connected "
             "components of the rest are the pieces (a point cloud is triangulated in the "
-            "view plane first). Not used by the fit yet.\n\n")
+            "view plane first), and a piece wrapped around the end of a cliff is split "
+            "(rule 4 of `asrbf_mesh._segment`). What `fit` uses by default "
+            "(`--pieces auto`).\n\n")
     body = head + "\n\n".join(parts)
     print(body)
     if len(settings) == 2:
