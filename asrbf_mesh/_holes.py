@@ -201,14 +201,15 @@ _KEY = np.int64(2) ** 31  # edge key base: vertex indices stay below 2**31
 def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                  rims: list[set[int]], scan_points: np.ndarray, R: np.ndarray,
                  spacing: float, limit: float | None,
-                 diag: float) -> tuple[np.ndarray, np.ndarray, int]:
+                 diag: float) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Fill the enclosed boundary loops the view-plane fills left open (in their own plane).
 
     Updates ``infos`` in place: a hole whose rim the loop shares becomes filled; a loop
     no view-plane hole covered (its region ran into the outside in the projection) is
     added as a new hole. A fill that would reuse an edge the mesh already has (a chord
     between two rim vertices that are neighbours across the surface) is refused: the
-    mesh stays manifold. Returns the vertices, the faces and the outer-border edges.
+    mesh stays manifold. Returns the vertices, the faces and each part's outer border
+    (a loop of vertex ids).
     """
     from ._hole_loops import fill_loop, open_loops, outer_loops
 
@@ -266,8 +267,7 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                                   len(loop), True, None, len(v), len(t)))
             rims.append(set(loop.tolist()))
     faces = np.vstack(new_f)
-    border = sum(len(loop) for loop in outer_loops(faces, n))
-    return np.vstack(new_v), faces, border
+    return np.vstack(new_v), faces, outer_loops(faces, n)
 
 
 #: Largest loop :func:`_chords_avoiding` triangulates (O(n^3) dynamic programming).
@@ -373,7 +373,7 @@ def _agree_with_scan(tris: np.ndarray, rim_keys: np.ndarray, inner_keys: np.ndar
 
 
 def _closed_after_all(clashed: dict[int, np.ndarray], infos: list[HoleInfo],
-                      faces: np.ndarray, n_vertices: int) -> None:
+                      faces: np.ndarray, outer: list[np.ndarray]) -> None:
     """Mark filled the holes whose dropped triangles left no gap (updates ``infos``).
 
     The triangles :func:`_agree_with_scan` drops often leave nothing open: they lay over
@@ -381,15 +381,13 @@ def _closed_after_all(clashed: dict[int, np.ndarray], infos: list[HoleInfo],
     have closed an edge of the outer border, which stays open anyway (bun180 punched with
     seed 5: 4 triangles dropped, every rim edge of its hole shared by two faces). A hole
     is filled when none of its rim edges and none of its patch's edges (``clashed``: their
-    keys) is still a boundary edge of the result, but on a part's outer border.
+    keys) is still a boundary edge of the result, but on a part's outer border
+    (``outer``: those loops).
     """
-    from ._hole_loops import outer_loops
-
     keys, count = np.unique(_edge_keys(faces), return_counts=True)
     still_open = keys[count == 1]
-    outer = [_rim_keys(loop) for loop in outer_loops(faces, n_vertices)]
     if outer:
-        still_open = np.setdiff1d(still_open, np.concatenate(outer))
+        still_open = np.setdiff1d(still_open, np.concatenate([_rim_keys(o) for o in outer]))
     for i, edge_keys in clashed.items():
         if not infos[i].filled and not _in_sorted(edge_keys, still_open).any():
             infos[i] = dataclasses.replace(infos[i], filled=True, reason=None)
@@ -532,7 +530,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     if len(faces) == 0:
         raise ScanError(f"{scan.source or 'scan'}: no triangles to find holes in, and "
                         "none could be made from its points")
-    holes, border, fp = find_holes(xy, faces, spacing, bay_mouth=BAY_MOUTH * spacing)
+    holes, _, fp = find_holes(xy, faces, spacing, bay_mouth=BAY_MOUTH * spacing)
     area = signed_areas(xy, faces)
     ccw = bool(np.sum(area > 0) >= np.sum(area < 0))
     rim_edges = boundary_edges(faces)[0]
@@ -585,10 +583,11 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     add_local = np.vstack(new_pts) if new_pts else np.zeros((0, 3))
     vertices = np.vstack([scan.points, add_local @ R.T])
     all_faces = np.vstack([faces, *new_tris]) if new_tris else faces
-    vertices, all_faces, border = _close_loops(vertices, all_faces, infos, rims,
-                                               scan.points, R, spacing, limit, diag)
+    vertices, all_faces, outer = _close_loops(vertices, all_faces, infos, rims,
+                                              scan.points, R, spacing, limit, diag)
     if clashed:
-        _closed_after_all(clashed, infos, all_faces, len(vertices))
+        _closed_after_all(clashed, infos, all_faces, outer)
     quality = np.r_[np.zeros(n_base), np.ones(len(vertices) - n_base)]
     mesh = Mesh(vertices, all_faces, vertex_quality=quality)
-    return FillResult(mesh, tuple(infos), border, time.perf_counter() - t0, net)
+    border_edges = sum(len(loop) for loop in outer)
+    return FillResult(mesh, tuple(infos), border_edges, time.perf_counter() - t0, net)

@@ -508,6 +508,7 @@ def test_a_patch_turns_to_the_scans_orientation_and_drops_clashing_triangles() -
 
 
 def test_a_hole_whose_dropped_triangles_left_no_gap_counts_as_filled() -> None:
+    from asrbf_mesh._hole_loops import outer_loops
     from asrbf_mesh._holes import HoleInfo, _closed_after_all, _edge_keys
 
     # a 4 x 4 grid of cells, each cut into two triangles; cell (1, 1) punched out
@@ -523,7 +524,7 @@ def test_a_hole_whose_dropped_triangles_left_no_gap_counts_as_filled() -> None:
 
     def run(faces: np.ndarray, keys: np.ndarray) -> bool:
         infos = [HoleInfo(0, 1.0, 1.0, (0.0, 0.0, 0.0), 4, False, "2 triangles would ...")]
-        _closed_after_all({0: keys}, infos, faces, 25)
+        _closed_after_all({0: keys}, infos, faces, outer_loops(faces, 25))
         return infos[0].filled
 
     assert run(full, cell)  # every edge shared by two faces: closed
