@@ -180,14 +180,16 @@ def _label_bays(labels: np.ndarray, outside: frozenset[int], rho: float) -> np.n
     and out of the probe's reach from beyond get a new label each.
     """
     pad = int(np.ceil(rho)) + 2
-    out = np.pad(np.isin(labels, list(outside)), pad, constant_values=True)
-    edt = ndimage.distance_transform_edt(out)
+    out = np.pad(_member(labels, outside), pad, constant_values=True)
+    if out.all():  # nothing covered: no bay
+        return labels
+    edt = _hk.distance_to_false(out)  # scipy's distance_transform_edt, compiled
     fits = edt > rho
     core, n = ndimage.label(fits, structure=np.ones((3, 3), bool))
     if n < 2:
         return labels
     beyond = np.unique(np.concatenate([core[0], core[-1], core[:, 0], core[:, -1]]))
-    inner = fits & ~np.isin(core, beyond)
+    inner = fits & ~_member(core, beyond)
     if not inner.any():
         return labels
     # a bay is at least BAY_WIDTH times as wide as its mouth: a long gap between two parts
@@ -198,26 +200,59 @@ def _label_bays(labels: np.ndarray, outside: frozenset[int], rho: float) -> np.n
     if not inner.any():
         return labels
     # the bays lie within rho + 2 cells of the inner cores, and what decides them within
-    # rho more: the two transforms below run on that window only (a Kinect frame's raster
-    # of 16 million cells spent 2.2 s on them whole)
-    ij = np.argwhere(inner)
+    # rho more: the two transforms below run on a window around each core (cores whose
+    # windows overlap share one) only. A Kinect frame's raster of 16 million cells spent
+    # 2.2 s on them whole, 1.2 s on one window around all its cores, 0.05 s on these.
     m = int(np.ceil(2.0 * rho)) + 4
-    a = np.maximum(ij.min(axis=0) - m, 0)
-    b = np.minimum(ij.max(axis=0) + m + 1, out.shape)
-    win = (slice(a[0], b[0]), slice(a[1], b[1]))
-    w_inner = inner[win]
-    probe = fits[win] & ~w_inner  # where the probe from beyond fits
-    # (with no such cell the transform would measure to a phantom one beyond the corner)
-    reach = ndimage.distance_transform_edt(~probe) <= rho if probe.any() \
-        else np.zeros_like(probe)
-    dist, (ii, jj) = ndimage.distance_transform_edt(~w_inner, return_indices=True)
     bay = np.zeros_like(out)
-    bay[win] = out[win] & ~reach & (dist <= rho + 2.0)
     bay_core = np.zeros_like(core)
-    bay_core[win] = core[win][ii, jj]
+    for win in _windows(np.where(inner, core, 0), m):
+        w_inner = inner[win]
+        probe = fits[win] & ~w_inner  # where the probe from beyond fits
+        # (with no such cell the transform would measure to a phantom one beyond the corner)
+        reach = ndimage.distance_transform_edt(~probe) <= rho if probe.any() \
+            else np.zeros_like(probe)
+        dist, (ii, jj) = ndimage.distance_transform_edt(~w_inner, return_indices=True)
+        here = out[win] & ~reach & (dist <= rho + 2.0)
+        bay[win] |= here
+        bay_core[win][here] = core[win][ii, jj][here]
     new = labels.copy()
     sl = (slice(pad, -pad), slice(pad, -pad))
     mask = bay[sl]
     ids, inv = np.unique(bay_core[sl][mask], return_inverse=True)
     new[mask] = int(labels.max()) + 1 + inv.ravel()
     return new
+
+
+def _member(labels: np.ndarray, among) -> np.ndarray:
+    """``np.isin(labels, among)`` for non-negative int labels: a lookup table, 8x faster."""
+    table = np.zeros(int(labels.max()) + 1, dtype=bool)
+    ids = np.fromiter(among, dtype=np.int64)
+    table[ids[(ids >= 0) & (ids < len(table))]] = True
+    return table[labels]
+
+
+def _windows(cores: np.ndarray, margin: int) -> list[tuple[slice, slice]]:
+    """Windows of the raster around its labelled ``cores``: each one's box grown by ``margin``.
+
+    Boxes that overlap are merged (their union's box, grown), until none does: a cell is
+    in one window at most, and a core within ``2 margin`` of another shares its window.
+    """
+    boxes = [np.array([max(s[0].start - margin, 0), max(s[1].start - margin, 0),
+                       min(s[0].stop + margin, cores.shape[0]),
+                       min(s[1].stop + margin, cores.shape[1])])
+             for s in ndimage.find_objects(cores) if s is not None]
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                a, b = boxes[i], boxes[j]
+                if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]:
+                    boxes[i] = np.r_[np.minimum(a[:2], b[:2]), np.maximum(a[2:], b[2:])]
+                    del boxes[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return [(slice(b[0], b[2]), slice(b[1], b[3])) for b in boxes]

@@ -28,7 +28,7 @@ from ._hole_find import used_once
 from ._hole_patch import away_from, grid_samples, triangulate
 
 __all__ = ["open_loops", "outer_loops", "split_loops", "boundary_cycles", "fill_loop",
-           "segments_cross"]
+           "segments_cross", "simple_cycles"]
 
 
 def boundary_cycles(faces: np.ndarray) -> list[np.ndarray]:
@@ -46,31 +46,7 @@ def boundary_cycles(faces: np.ndarray) -> list[np.ndarray]:
     if len(bnd) == 0:
         return []
     order = np.lexsort((bnd[:, 1], bnd[:, 0]))
-    bnd = bnd[order]
-    starts = np.searchsorted(bnd[:, 0], np.arange(int(bnd.max()) + 2))
-    used = np.zeros(len(bnd), dtype=bool)
-    cycles = []
-    for first in range(len(bnd)):
-        if used[first]:
-            continue
-        walk = [int(bnd[first, 0])]
-        cur = first
-        closed = False
-        while True:
-            used[cur] = True
-            nxt_v = int(bnd[cur, 1])
-            if nxt_v == walk[0]:
-                closed = True
-                break
-            lo, hi = starts[nxt_v], starts[nxt_v + 1]
-            free = [k for k in range(lo, hi) if not used[k]]
-            if not free:
-                break
-            walk.append(nxt_v)
-            cur = free[0]
-        if closed and len(walk) >= 3:
-            cycles.append(np.array(walk, dtype=np.int64))
-    return cycles
+    return _hk.walk_cycles(bnd[order])
 
 
 def split_loops(faces: np.ndarray, n_vertices: int, loops: list[np.ndarray] | None = None
@@ -100,6 +76,36 @@ def split_loops(faces: np.ndarray, n_vertices: int, loops: list[np.ndarray] | No
     outer = set(longest.values())
     rest = [loop for i, loop in enumerate(loops) if i not in outer]
     return [loops[i] for i in sorted(outer)], sorted(rest, key=len, reverse=True)
+
+
+def simple_cycles(loop: np.ndarray) -> list[np.ndarray]:
+    """Split a boundary cycle that passes a vertex more than once into simple cycles.
+
+    At a pinch (a vertex where two stretches of boundary meet) :func:`boundary_cycles`
+    walks on, so one cycle can hold the outer border and a gap pinched off it. Each time
+    the walk comes back to a vertex it already holds, the stretch since then is cut off
+    as a cycle of its own; what remains at the end is the last one. Every edge of
+    ``loop`` is in one of the cycles, in its direction, but the slits (a stretch out to a
+    vertex and straight back: no area to fill).
+    """
+    stack: list[int] = []
+    at: dict[int, int] = {}
+    out = []
+    for v in loop.tolist():
+        i = at.get(v)
+        if i is None:
+            at[v] = len(stack)
+            stack.append(v)
+            continue
+        cut = stack[i:]
+        for w in cut[1:]:
+            del at[w]
+        del stack[i + 1:]
+        if len(cut) >= 3:
+            out.append(np.array(cut, dtype=np.int64))
+    if len(stack) >= 3:
+        out.append(np.array(stack, dtype=np.int64))
+    return out
 
 
 def open_loops(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:

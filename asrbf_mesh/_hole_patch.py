@@ -298,9 +298,12 @@ def _residual_spline(ctx: Ctx, ring: np.ndarray, fnet: Network, centre: np.ndarr
 _MIN_NZ = 0.15
 _FLAT = 0.5
 _FILL_REL = 0.18
-#: A view ray's secant search stops once it is this close to the surface (x hole size);
-#: a ray that ends farther than 1e-6 x the hole size missed it.
-_SECANT_DONE = 1e-10
+#: A view ray's search for the ring's surface (Newton's iterations, compiled: the secant
+#: iterations through scipy's spline took 2.1 s of fill-holes on a Kinect frame) stops
+#: once it is this close to it (x hole size); a ray that ends farther than _RAY_MISSED x
+#: the hole size missed it.
+_RAY_DONE = 1e-10
+_RAY_MISSED = 1e-6
 
 
 def _plane_depth(ctx: Ctx, ring: np.ndarray, centre: np.ndarray, size: float):
@@ -308,7 +311,8 @@ def _plane_depth(ctx: Ctx, ring: np.ndarray, centre: np.ndarray, size: float):
 
     The ring's points (view-frame xyz) are expressed as heights ``h(u, v)`` over their
     principal plane, a thin-plate spline is fitted there, and each query point's depth is
-    the ``z`` where the view ray through it meets that surface (secant iterations).
+    the ``z`` where the view ray through it meets that surface
+    (:func:`~asrbf_mesh._holes_kernels.ray_depths`).
     Returns None when the plane is seen too obliquely for the ray to meet it well or the
     ring too curved to have one; the callable returns NaN where the ray did not meet it.
     """
@@ -325,35 +329,12 @@ def _plane_depth(ctx: Ctx, ring: np.ndarray, centre: np.ndarray, size: float):
         return None
     uv = (P - c) @ axes.T
     h = (P - c) @ n
-    try:
-        spline = RBFInterpolator(uv / size, h / size, kernel="thin_plate_spline",
-                                 neighbors=None)
-    except (np.linalg.LinAlgError, ValueError):  # too few points, or all on a line
+    spline = _hk.thin_plate(uv / size, h / size)
+    if spline is None:  # too few points, or all on a line
         return None
 
     def depth(q: np.ndarray) -> np.ndarray:
-        def F(at: np.ndarray, z: np.ndarray) -> np.ndarray:
-            p = np.column_stack([q[at], z]) - c
-            return p @ n - size * spline(p @ axes.T / size)
-
-        every = np.arange(len(q))
-        z0 = c[2] - ((q - c[:2]) @ n[:2]) / n[2]
-        z1 = z0 + 0.01 * size
-        f0, f1 = F(every, z0), F(every, z1)
-        # secant steps for the points not yet on the surface (each spline evaluation
-        # costs a ring's worth of kernel terms per point: the points done are left out)
-        todo = every[np.abs(f1) > _SECANT_DONE * size]
-        for _ in range(8):
-            if len(todo) == 0:
-                break
-            a0, a1, g0, g1 = z0[todo], z1[todo], f0[todo], f1[todo]
-            den = g1 - g0
-            ok = np.abs(den) > 1e-300
-            a2 = np.where(ok, a1 - g1 * (a1 - a0) / np.where(ok, den, 1.0), a1)
-            z0[todo], f0[todo] = a1, g1
-            z1[todo], f1[todo] = a2, F(todo, a2)
-            todo = todo[np.abs(f1[todo]) > _SECANT_DONE * size]
-        return np.where(np.abs(f1) <= 1e-6 * size, z1, np.nan)
+        return _hk.ray_depths(q, c, axes, n, size, spline, _RAY_DONE, _RAY_MISSED)
 
     return depth
 
@@ -383,8 +364,10 @@ def close_patch(pts: np.ndarray, rim: np.ndarray, seg: np.ndarray, tris: np.ndar
     wrong = area < 0 if ctx.ccw else area > 0
     tris[wrong] = tris[wrong][:, [0, 2, 1]]
     te = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-    te_keys = set(map(tuple, te.tolist()))
-    missing = sum(tuple(r) not in te_keys for r in np.sort(seg, axis=1).tolist())
+    rim_e = np.sort(seg, axis=1).astype(np.int64)
+    key = int(len(pts)) + 1  # local vertex ids: one int64 key per edge
+    missing = int(np.count_nonzero(~np.isin(rim_e[:, 0] * key + rim_e[:, 1],
+                                            te[:, 0].astype(np.int64) * key + te[:, 1])))
     # depths: a thin plate over the ring's plane, or the network's substrate + the rim
     # residual carried across the hole
     n_rim = len(rim)

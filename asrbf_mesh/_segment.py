@@ -396,10 +396,8 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     points of a cliff's wall belong to the piece of their nearest kept point, and the
     bisector between the cliff's upper and lower sides runs through its wall.
     """
-    from scipy.sparse import csr_matrix
-
     from ._frame import sampling_spacing
-    from ._segment_kernels import edge_graph, edge_lengths, jump_pairs
+    from ._segment_kernels import SeedGraph, edge_graph, edge_lengths, jump_pairs
 
     if len(faces) == 0 or jump <= 0 or len(local) < 4:
         return labels, 0
@@ -415,7 +413,7 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
         return labels, 0
     n = len(local)
     indptr, indices = edge_graph(n, np.ascontiguousarray(faces, np.int64))
-    graph = csr_matrix((edge_lengths(local, indptr, indices), indices, indptr), shape=(n, n))
+    graph = SeedGraph(indptr, indices, edge_lengths(local, indptr, indices))
     labels = labels.copy()
     n_split = 0
     todo = list(np.unique(labels[jumps[:, 0]]))
@@ -444,13 +442,12 @@ def _wrapped_side(local: np.ndarray, own: np.ndarray, graph, labels: np.ndarray,
     """Boolean over ``own``: the lower side of its longest cliff, or None.
 
     ``jumps`` are the jump pairs (point indices) of the piece's longest cliff
-    (:func:`_largest_cliff`), ``graph`` the triangles' edges (CSR, 3D lengths), ``labels``
+    (:func:`_largest_cliff`), ``graph`` the triangles' edges (a
+    :class:`~asrbf_mesh._segment_kernels.SeedGraph`, 3D lengths), ``labels``
     the pieces so far (a search stays in its piece) and ``anchor`` each point's nearest
     point on a kept triangle (see :func:`_label`). None when the cliff has fewer than
     ``_MIN_CLIFF_PAIRS`` pairs or the bisector would not split the piece.
     """
-    from ._segment_kernels import nearest_seed
-
     if len(jumps) < _MIN_CLIFF_PAIRS:
         return None
     upper_first = local[jumps[:, 0], 2] > local[jumps[:, 1], 2]
@@ -462,8 +459,7 @@ def _wrapped_side(local: np.ndarray, own: np.ndarray, graph, labels: np.ndarray,
         return None
     # each point takes the side of its nearest jump point along the triangles' edges; a
     # point in no triangle, the side of its anchor
-    source = nearest_seed(graph.indptr, graph.indices, graph.data, labels,
-                          np.concatenate([up, lo]))
+    source = graph.nearest(labels, np.concatenate([up, lo]))
     source = np.where(source[own] >= 0, source[own], source[anchor[own]])
     if not (source >= 0).any():
         return None

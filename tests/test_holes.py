@@ -586,3 +586,54 @@ def test_bays_found_in_a_window_match_the_whole_raster(case: int) -> None:
     for rho in (3.0, 5.5, 8.0):
         np.testing.assert_array_equal(_label_bays(labels, outside, rho),
                                       _bays_whole_raster(labels, outside, rho))
+
+
+def test_simple_cycles_cut_a_walk_at_the_vertices_it_passes_twice() -> None:
+    from asrbf_mesh._hole_loops import simple_cycles
+
+    # a border 0..5 that passes vertex 2 twice, with the gap 2-6-7 pinched off it
+    walk = np.array([0, 1, 2, 6, 7, 2, 3, 4, 5])
+    got = sorted(map(list, simple_cycles(walk)), key=len)
+    assert got == [[2, 6, 7], [0, 1, 2, 3, 4, 5]]
+    # a slit (out and straight back) has no area: dropped; a simple cycle stays whole
+    assert [c.tolist() for c in simple_cycles(np.array([0, 1, 2, 8, 2, 3]))] == [[0, 1, 2, 3]]
+    assert [c.tolist() for c in simple_cycles(np.arange(5))] == [list(range(5))]
+
+
+def test_a_gap_pinched_off_the_outer_border_is_closed_a_blob_is_not() -> None:
+    from asrbf_mesh._hole_loops import split_loops
+    from asrbf_mesh._holes import HoleInfo, _close_loops, _rim_keys, _winds_as_hole
+
+    # a 6 x 6 grid of cells (counter-clockwise triangles): cell (1, 0) cut out of the
+    # border, cell (2, 1) punched out: they share a vertex; the vertices renumbered so
+    # that the border's walk runs through the punched cell at that pinch
+    n = 7
+    ij = np.arange(n * n).reshape(n, n)
+    faces = np.array([t for i in range(n - 1) for j in range(n - 1)
+                      if (i, j) not in {(1, 0), (2, 1)}
+                      for t in ([ij[i, j], ij[i + 1, j], ij[i + 1, j + 1]],
+                                [ij[i, j], ij[i + 1, j + 1], ij[i, j + 1]])])
+    perm = np.random.default_rng(6).permutation(n * n)
+    faces = perm[faces]
+    grid = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 2)
+    xyz = np.zeros((n * n, 3))
+    xyz[perm, :2] = grid
+    xyz[perm, 2] = 0.02 * (grid ** 2).sum(axis=1)
+    outer, rest = split_loops(faces, n * n)
+    assert not rest and len(outer[0]) == 30  # the gap is walked as part of the border
+    cell = perm[[ij[2, 1], ij[3, 1], ij[3, 2], ij[2, 2]]]
+    assert not _winds_as_hole(xyz[outer[0]], True)  # the border winds as a blob's
+
+    def run(hole_keys: np.ndarray) -> tuple[bool, int]:
+        infos = [HoleInfo(0, 1.0, 1.0, (2.5, 1.5, 0.0), 4, False, "2 rim edges ...")]
+        v, f, border = _close_loops(xyz, faces, infos, [set(cell.tolist())], hole_keys,
+                                    True, xyz, np.eye(3), 1.0, None, 10.0)
+        assert len(v) == len(xyz) and len(border) == 1
+        return infos[0].filled, len(f) - len(faces)
+
+    assert run(np.sort(_rim_keys(cell))) == (True, 2)  # the gap is closed: two triangles
+    assert run(np.zeros(0, np.int64)) == (False, 0)  # no hole's rim in it: left alone
+    # the triangles' half-edges run clockwise around a hole (the cell taken the other
+    # way round), counter-clockwise around a blob (the cell itself): never filled
+    assert _winds_as_hole(xyz[cell[::-1]], True) and not _winds_as_hole(xyz[cell], True)
+    assert _winds_as_hole(xyz[cell], False)

@@ -1,0 +1,74 @@
+"""The compiled helpers of hole filling against the library code they stand in for."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+from scipy.interpolate import RBFInterpolator
+
+from asrbf_mesh import _holes_kernels as hk
+
+
+def _once_reference(edges: np.ndarray) -> np.ndarray:
+    e = np.sort(edges, axis=1)
+    _, inv, counts = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+    return counts[inv.ravel()] == 1
+
+
+def test_once_counts_pairs_either_way_round() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        e = rng.integers(0, 12, size=(rng.integers(1, 40), 2))
+        assert np.array_equal(hk.once(e), _once_reference(e))
+    assert hk.once(np.array([[0, 1], [1, 0], [1, 2]])).tolist() == [False, False, True]
+    assert hk.once(np.zeros((0, 2), np.int64)).shape == (0,)
+    with pytest.raises(ValueError, match="vertex ids"):
+        hk.once(np.array([[0, -1]]))
+
+
+def test_distance_to_false_is_scipys_euclidean_transform() -> None:
+    rng = np.random.default_rng(1)
+    for _ in range(150):
+        mask = rng.random(rng.integers(1, 30, size=2)) < rng.uniform(0.3, 0.999)
+        if mask.all():
+            continue
+        assert np.array_equal(hk.distance_to_false(mask), ndimage.distance_transform_edt(mask))
+    with pytest.raises(ValueError, match="no False"):
+        hk.distance_to_false(np.ones((3, 3), bool))
+
+
+def test_walk_cycles_follows_the_first_way_out() -> None:
+    # loops 1-5-6 and 5-2-3 pinched at 5: walked from 1, the walk takes 5's first way
+    # out (to 2) round the second loop, then the way left (to 6) home
+    e = np.array([[1, 5], [2, 3], [3, 5], [5, 2], [5, 6], [6, 1]])
+    assert [c.tolist() for c in hk.walk_cycles(e)] == [[1, 5, 2, 3, 5, 6]]
+    # a loop back at its start closes there
+    e = np.array([[0, 1], [0, 3], [1, 2], [2, 0], [3, 4], [4, 0]])
+    assert [c.tolist() for c in hk.walk_cycles(e)] == [[0, 1, 2], [0, 3, 4]]
+    # an open walk (no way back to its start) is dropped
+    assert hk.walk_cycles(np.array([[0, 1], [1, 2]])) == []
+    with pytest.raises(ValueError, match="sorted"):
+        hk.walk_cycles(np.array([[1, 0], [0, 1]]))
+
+
+def test_thin_plate_matches_scipy_and_rays_meet_it() -> None:
+    rng = np.random.default_rng(2)
+    uv = rng.uniform(-1, 1, (300, 2))
+    h = 0.1 * np.sin(3 * uv[:, 0]) + 0.05 * uv[:, 1] ** 2
+    spline = hk.thin_plate(uv, h)
+    ref = RBFInterpolator(uv, h, kernel="thin_plate_spline")
+    q = rng.uniform(-0.8, 0.8, (500, 2))
+    flat = hk.ray_depths(q, np.zeros(3), np.eye(3)[:2], np.eye(3)[2], 1.0, spline, 1e-12, 1e-6)
+    assert np.abs(flat - ref(q)).max() < 1e-9
+    # a plane tilted by 0.5 rad: each ray's point lies on the surface
+    t = 0.5
+    axes = np.array([[np.cos(t), 0.0, np.sin(t)], [0.0, 1.0, 0.0]])
+    normal = np.array([-np.sin(t), 0.0, np.cos(t)])
+    z = hk.ray_depths(q, np.zeros(3), axes, normal, 2.0, spline, 1e-10, 1e-6)
+    p = np.column_stack([q, z])
+    assert np.all(np.isfinite(z))
+    assert np.abs(p @ normal - 2.0 * ref(p @ axes.T / 2.0)).max() < 1e-8
+    # too few points, all on a line: no spline
+    assert hk.thin_plate(uv[:2], h[:2]) is None
+    assert hk.thin_plate(np.column_stack([uv[:, 0], uv[:, 0]]), h) is None
