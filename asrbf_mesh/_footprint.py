@@ -232,16 +232,25 @@ def _member(labels: np.ndarray, among) -> np.ndarray:
     return table[labels]
 
 
+#: Most bay cores given a window each (:func:`_windows`).
+_MAX_WINDOWS = 64
+
+
 def _windows(cores: np.ndarray, margin: int) -> list[tuple[slice, slice]]:
     """Windows of the raster around its labelled ``cores``: each one's box grown by ``margin``.
 
     Boxes that overlap are merged (their union's box, grown), until none does: a cell is
     in one window at most, and a core within ``2 margin`` of another shares its window.
+    Past :data:`_MAX_WINDOWS` cores (the merging is quadratic or worse), one window
+    around them all.
     """
     boxes = [np.array([max(s[0].start - margin, 0), max(s[1].start - margin, 0),
                        min(s[0].stop + margin, cores.shape[0]),
                        min(s[1].stop + margin, cores.shape[1])])
              for s in ndimage.find_objects(cores) if s is not None]
+    if len(boxes) > _MAX_WINDOWS:
+        b = np.r_[np.min(boxes, axis=0)[:2], np.max(boxes, axis=0)[2:]]
+        return [(slice(b[0], b[2]), slice(b[1], b[3]))]
     merged = True
     while merged:
         merged = False

@@ -562,11 +562,19 @@ def _bays_whole_raster(labels, outside, rho):
 
 
 @pytest.mark.parametrize("case", range(6))
-def test_bays_found_in_a_window_match_the_whole_raster(case: int) -> None:
-    """The bays' distance transforms run on a window around them: the same labels."""
+@pytest.mark.parametrize("max_windows", [64, 0])
+def test_bays_found_in_a_window_match_the_whole_raster(case: int, max_windows: int,
+                                                       monkeypatch) -> None:
+    """The bays' distance transforms run on windows around their cores: the same labels.
+
+    With ``max_windows`` 0, one window around every core (what many cores get).
+    """
     from scipy import ndimage
 
+    import asrbf_mesh._footprint as footprint
     from asrbf_mesh._footprint import _label_bays
+
+    monkeypatch.setattr(footprint, "_MAX_WINDOWS", max_windows)
 
     rng = np.random.default_rng(case)
     y, x = np.mgrid[0:120, 0:160]
