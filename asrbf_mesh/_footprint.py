@@ -202,7 +202,8 @@ def _label_bays(labels: np.ndarray, outside: frozenset[int], rho: float) -> np.n
     # the bays lie within rho + 2 cells of the inner cores, and what decides them within
     # rho more: the two transforms below run on a window around each core (cores whose
     # windows overlap share one) only. A Kinect frame's raster of 16 million cells spent
-    # 2.2 s on them whole, 1.2 s on one window around all its cores, 0.05 s on these.
+    # 2.2 s on them whole, 1.2 s on one window around all its cores, 0.004 s on these
+    # (two windows).
     m = int(np.ceil(2.0 * rho)) + 4
     bay = np.zeros_like(out)
     bay_core = np.zeros_like(core)
@@ -225,7 +226,11 @@ def _label_bays(labels: np.ndarray, outside: frozenset[int], rho: float) -> np.n
 
 
 def _member(labels: np.ndarray, among) -> np.ndarray:
-    """``np.isin(labels, among)`` for non-negative int labels: a lookup table, 8x faster."""
+    """``np.isin(labels, among)`` for non-negative int labels, by a lookup table.
+
+    ``np.isin`` sorts: on a Kinect frame's raster of 16 million cells the bays' two
+    calls took 0.42 s, the tables 0.05-0.08 s.
+    """
     table = np.zeros(int(labels.max()) + 1, dtype=bool)
     ids = np.fromiter(among, dtype=np.int64)
     table[ids[(ids >= 0) & (ids < len(table))]] = True

@@ -615,7 +615,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     # the rim edges of the holes still open (not for their size): a cycle pinched off the
     # outer border that holds one is what their patch left
     hole_keys = np.unique(np.concatenate([np.zeros(0, np.int64)] + [
-        _rim_keys_of(h.edges) for h, info in zip(holes, infos, strict=False)
+        _rim_keys_of(h.edges) for h, info in zip(holes, infos, strict=True)
         if not info.filled and (limit is None or h.size <= limit)]))
     vertices, all_faces, outer = _close_loops(vertices, all_faces, infos, rims, hole_keys,
                                               ccw, scan.points, R, spacing, limit, diag)
