@@ -27,7 +27,7 @@ from ._mesh import Mesh
 from ._network import FitInfo, Network
 from ._outliers import OutlierWarning, describe_isolated, isolated_points
 from ._pieces import TAIL_PRUNE, learn_pieces, refine_tails
-from ._segment import Segmentation, segment
+from ._segment import Segmentation, depth_quanta, segment
 from ._validate import check_choice, check_points, check_seed
 from ._version import __version__
 from .errors import ConfigError, ScanError
@@ -206,7 +206,9 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
     added = 0
     if refine:
         tr = time.perf_counter()
-        params, added = refine_tails(hf, cfg, *params, learned.d_min, pr)
+        quanta = depth_quanta(hf.z)
+        params, added = refine_tails(hf, cfg, *params, learned.d_min, pr,
+                                     None if quanta is None else quanta.at(hf.z))
         polish_seconds += time.perf_counter() - tr
     a0, centers, widths, weights = params
     net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)

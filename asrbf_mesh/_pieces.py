@@ -41,7 +41,7 @@ from ._learn import MIN_POINTS, auto_d_min, learn_polished
 from ._piece import Piece
 from ._piece_map import PieceMap
 from ._polish import drop_idle, extend_and_solve, extend_normal, polish_weights, solve_and_drop
-from ._segment import Segmentation
+from ._segment import Segmentation, depth_quanta
 from ._validate import progress as progress_bar
 
 __all__ = ["PiecesLearned", "learn_pieces", "parallel_pieces", "piece_seed", "refine_tails",
@@ -53,6 +53,14 @@ TAIL_FACTOR = 0.6
 TAIL_ROUNDS = 2
 #: Tail refinement: the threshold is at least this many robust noise scales of the piece.
 TAIL_NOISE = 3.0
+#: Tail refinement: where depths come in levels (a depth camera's quanta), the threshold
+#: is at least this many quanta at the point's depth: a smooth surface through steps one
+#: quantum high misses them by up to half a quantum, plus the camera's own noise (about
+#: a quantum). Measured on the two Kinect frames (``scripts/bench_kinect_mesh.py``):
+#: K 421 -> 327 and 305 -> 259 (the single network's: 362 and 296), E-bar 0.00137 ->
+#: 0.00140 and 0.00131 -> 0.00133 (single: 0.00289, 0.00277); 1 quantum gave 348 and
+#: 274, 2 quanta 325 and 257.
+TAIL_QUANTA = 1.5
 #: Tail refinement: neurons whose polished |weight| is under this multiple of E are dropped.
 TAIL_PRUNE = 0.3
 #: Tail refinement, after the rounds: neurons whose removal (the other weights solved
@@ -130,11 +138,14 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
     tick = progress_bar(int(sizes[learned].sum()) * cfg.passes, progress, "learning pieces",
                         unit="step")
 
+    quanta = depth_quanta(hf.z)  # a depth camera's levels, for the tails' threshold
+
     def one(i: int) -> tuple:
         idx = order[bounds[i]:bounds[i + 1]]
         return (idx, *_learn_piece(HeightField(hf.xy[idx], hf.z[idx], hf.frame, hf.spacing,
                                                hf.fold), bool(segmentation.small[i]), cfg,
-                                   polish, piece_seed(seed, i), tick))
+                                   polish, piece_seed(seed, i), tick,
+                                   None if quanta is None else quanta.at(hf.z[idx])))
 
     big_first = [int(i) for i in np.argsort(-sizes, kind="stable")]
     if int(learned.sum()) >= 2 and parallel_pieces():
@@ -176,7 +187,7 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
 
 
 def _learn_piece(sub: HeightField, small: bool, cfg: FitConfig, polish: str, seed: int,
-                 tick: Any) -> tuple:
+                 tick: Any, quantum: np.ndarray | None = None) -> tuple:
     """Learn, polish and refine one piece.
 
     Returns ``(piece, |f - z| per point, |f - z| summed before the polish, learning
@@ -193,7 +204,8 @@ def _learn_piece(sub: HeightField, small: bool, cfg: FitConfig, polish: str, see
             prune_below=TAIL_PRUNE * cfg.error_threshold)
         if polish != "none":
             tr = time.perf_counter()
-            params, info["tail_neurons"] = refine_tails(sub, cfg, *params, learned.d_min, pr)
+            params, info["tail_neurons"] = refine_tails(sub, cfg, *params, learned.d_min, pr,
+                                                        quantum)
             info["weak_pruned"] = len(learned.widths) + info["tail_neurons"] - len(params[2])
             seconds += time.perf_counter() - tr
         piece = Piece(*params, learned.log, info)
@@ -267,14 +279,16 @@ def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
 
 def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarray,
                  widths: np.ndarray, weights: np.ndarray, d_min: float,
-                 polished: Any = None
+                 polished: Any = None, quantum: np.ndarray | None = None
                  ) -> tuple[tuple[float, np.ndarray, np.ndarray, np.ndarray], int]:
     """Add neurons where a polished piece still misses its points; (parameters, added).
 
     Each round takes the points whose error across the surface (the depth error times
     the cosine of the slope, in physical proportions) exceeds ``max(TAIL_FACTOR E,
     TAIL_NOISE x 1.4826 MAD)`` (MAD over a sample of the points: the piece's noise),
-    worst first and no two closer than D_min; each becomes
+    and where the depths come in levels, ``TAIL_QUANTA`` x ``quantum`` (the depth
+    quantum at each point, :func:`~asrbf_mesh._segment.depth_quanta`), worst first and
+    no two closer than D_min; each becomes
     a neuron ``u = x, sigma = max(psi ||x - u_near||, D_min / 2)`` (the growth rule of
     learning) whose weight is solved by least squares over the points under it, the
     other neurons fixed (one global solve costs as much as the polish; these cost a
@@ -300,7 +314,8 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     from scipy.spatial import cKDTree
 
     scale = np.asarray(sub.frame.scale, dtype=np.float64)
-    grid, slope2, limit = None, None, 0.0
+    grid, slope2 = None, None
+    limit: float | np.ndarray = 0.0
     # the normal equations of the neurons so far, while they are the polish's extended
     # (dense); the new neurons' weights come from them (:func:`_appended_weights`)
     normal = polished if polished is not None and isinstance(polished.ata, np.ndarray) \
@@ -318,13 +333,25 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         if grid is None:  # the first round: the piece's noise scale, once
             grid, slope2 = point_grid(sub.xy), np.full(sub.n_points, np.nan)
             sample = np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE))
-            some = _across(piece, sub, res, sample, scale, cfg.support, grid, slope2)
-            mad = float(np.median(np.abs(some - np.median(some))))
+            floor = TAIL_FACTOR * cfg.error_threshold
+            if quantum is not None:
+                floor = max(floor, TAIL_QUANTA * float(quantum.min()))
+            # the MAD of nonnegative errors is at most their upper median, and the error
+            # across is at most the depth error: when even the depth errors' upper
+            # median cannot raise the threshold, the errors across are not measured
+            upper = float(np.partition(np.abs(res[sample]), len(sample) // 2)[len(sample) // 2])
+            mad = 0.0
+            if TAIL_NOISE * 1.4826 * upper > floor:
+                some = _across(piece, sub, res, sample, scale, cfg.support, grid, slope2)
+                mad = float(np.median(np.abs(some - np.median(some))))
             limit = max(TAIL_FACTOR * cfg.error_threshold, TAIL_NOISE * 1.4826 * mad)
+            if quantum is not None:
+                limit = np.maximum(limit, TAIL_QUANTA * quantum)
         above = factor * limit
         worst = np.flatnonzero(np.abs(res) > above)  # the error across is at most |res|
         off = _across(piece, sub, res, worst, scale, cfg.support, grid, slope2)
-        worst, off = worst[off > above], off[off > above]
+        keep = off > (above[worst] if isinstance(above, np.ndarray) else above)
+        worst, off = worst[keep], off[keep]
         worst = worst[np.argsort(-off, kind="stable")][:_TAIL_CANDIDATES]
         picked = worst[spread(sub.xy[worst], d_min)]
         if cfg.max_neurons is not None:  # the neuron cap holds here too

@@ -203,32 +203,63 @@ class Segmentation:
                 f"{plural(self.n_pieces, 'piece')}, {int(self.small.sum())} small)")
 
 
+class DepthQuanta:
+    """The gap between a depth camera's neighbouring depth levels, at any depth.
+
+    Depths come in levels (a disparity camera's quanta, growing with the square of the
+    depth) when there are at least ``_MIN_LEVELS`` distinct values and at most one per
+    two points; the quantum at a level is the median gap over ``_QUANTUM_WINDOW``
+    neighbouring levels. :func:`depth_quanta` returns None for depths that do not come
+    in levels (a Stanford range scan, an elevation grid in floats).
+    """
+
+    def __init__(self, levels: np.ndarray, gaps: np.ndarray) -> None:
+        self.levels, self.gaps = levels, gaps
+
+    def at(self, depth: np.ndarray) -> np.ndarray:
+        """Return the quantum at each of ``depth`` (the gap above the level at or above it)."""
+        i = np.minimum(np.searchsorted(self.levels, depth), len(self.gaps) - 1)
+        return self.gaps[i]
+
+
+def depth_quanta(depth: np.ndarray) -> DepthQuanta | None:
+    """Return the depth quanta of ``depth`` (:class:`DepthQuanta`), None without levels.
+
+    Examples
+    --------
+    >>> q = depth_quanta(np.repeat(np.arange(100) * 0.5, 3))
+    >>> float(q.at(np.array([10.0]))[0])
+    0.5
+    >>> depth_quanta(np.linspace(0.0, 1.0, 300)) is None
+    True
+    """
+    levels = np.unique(depth)
+    # a few levels are the scene's own (a cliff between two flat terraces), not quanta
+    if len(levels) < _MIN_LEVELS or len(levels) > len(depth) // 2:
+        return None
+    from scipy.ndimage import median_filter
+
+    return DepthQuanta(levels, median_filter(np.diff(levels), size=_QUANTUM_WINDOW,
+                                             mode="nearest"))
+
+
 class _Steps:
     """The minimum depth step that may be cut, at any depth (see the module text)."""
 
     def __init__(self, depth: np.ndarray, min_step: float | None) -> None:
-        self.levels = self.quanta = None
+        self.quanta: DepthQuanta | None = None
         if min_step is not None:  # the caller's step, exactly
             self.floor = float(min_step)
             return
         lo, hi = np.percentile(depth, [1.0, 99.0]) if len(depth) else (0.0, 0.0)
         self.floor = MIN_STEP_REL * float(hi - lo)
-        levels = np.unique(depth)
-        # a few levels are the scene's own (a cliff between two flat terraces), not quanta
-        if len(levels) < _MIN_LEVELS or len(levels) > len(depth) // 2:
-            return
-        from scipy.ndimage import median_filter
-
-        self.levels = levels
-        self.quanta = _QUANTA * median_filter(np.diff(levels), size=_QUANTUM_WINDOW,
-                                              mode="nearest")
+        self.quanta = depth_quanta(depth)
 
     def at(self, depth: np.ndarray) -> np.ndarray | float:
         """Return the minimum step for a step starting at ``depth`` (its lower end)."""
         if self.quanta is None:
             return self.floor
-        i = np.minimum(np.searchsorted(self.levels, depth), len(self.quanta) - 1)
-        return np.maximum(self.floor, self.quanta[i])
+        return np.maximum(self.floor, _QUANTA * self.quanta.at(depth))
 
     def keep(self, za: np.ndarray, zb: np.ndarray) -> np.ndarray:
         """Whether each step from ``za`` to ``zb`` is large enough to be cut."""

@@ -183,6 +183,38 @@ def test_the_tails_are_refined_to_the_threshold(monkeypatch) -> None:
     assert refined.info["ebar"] < plain.info["ebar"]
 
 
+def test_the_tails_do_not_chase_a_depth_cameras_quanta(monkeypatch) -> None:
+    import asrbf_mesh._pieces as P
+    from asrbf_mesh._segment import depth_quanta
+
+    # a smooth surface whose depths come in levels 1/80 of its depth range apart: a
+    # surface through them misses each level by up to half a quantum, above 0.6 E
+    q = 1.0 / 80
+    pts, faces = height_grid(lambda x, y: 0.5 + 0.45 * np.sin(x / 7.0) * np.cos(y / 5.0),
+                             50, 40, x=(0.0, 49.0), y=(0.0, 39.0))
+    pts[:, 2] = np.round(pts[:, 2] / q) * q
+    scan = am.Scan(pts, faces)
+    quanta = depth_quanta(am.to_height_field(pts).z)
+    assert quanta is not None and quanta.at(np.array([0.5]))[0] == pytest.approx(
+        q / np.ptp(pts[:, 2]), rel=1e-6)
+    aware = am.fit(scan, seed=0, progress=False, error_threshold=0.005)
+    monkeypatch.setattr(P, "TAIL_QUANTA", 0.0)
+    chasing = am.fit(scan, seed=0, progress=False, error_threshold=0.005)
+    assert chasing.info["tail_neurons"] > aware.info["tail_neurons"]
+    assert aware.n_neurons < chasing.n_neurons
+
+
+def test_the_noise_bound_the_tails_skip_on_holds() -> None:
+    # refine_tails skips measuring the errors across when the depth errors' upper median
+    # cannot raise the threshold: MAD(x) <= sorted(y)[n // 2] for 0 <= x <= y
+    rng = np.random.default_rng(5)
+    for n in list(range(1, 40)) + [4096, 4097]:
+        y = np.abs(rng.standard_normal(n)) * rng.choice([1e-6, 1.0, 1e3])
+        x = y / np.sqrt(1.0 + rng.random(n) * rng.choice([0.0, 1.0, 100.0]))
+        mad = np.median(np.abs(x - np.median(x)))
+        assert mad <= np.partition(y, n // 2)[n // 2]
+
+
 def test_a_given_segmentation_is_used() -> None:
     scan = cliff_scan()
     seg = am.segment(scan, min_piece_points=2000)  # both pieces small: none learns
