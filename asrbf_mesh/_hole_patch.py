@@ -1,6 +1,7 @@
 """Building one hole's fill: triangulation of the hole, depths from the network and the rim.
 
-New vertices inside the hole at the scan's own spacing, a constrained triangulation in
+New vertices inside the hole at the scan's own spacing (the rim's where the scan is sampled
+more coarsely: ``_holes.LOCAL_SPACING``), a constrained triangulation in
 xy (``triangle``, with no extra vertex on the hole's boundary so the rim edges are shared
 exactly), depths from a thin-plate spline of the scan points around the rim, fitted as
 heights over the ring's own best-fit plane (:func:`_plane_depth`); where that plane is

@@ -9,7 +9,8 @@ spacings behind a narrower mouth (a hole punched through the border or into the 
 between two parts of the scan), is filled up to its mouth; the mouth stays open.
 
 Each hole selected by size is filled without touching the scan: new vertices
-inside the hole at the scan's own spacing, a constrained triangulation in xy
+inside the hole at the scan's own spacing (or its rim's, where the scan is sampled more
+coarsely: :data:`LOCAL_SPACING`), a constrained triangulation in xy
 (``triangle``, with no extra vertex on the hole's boundary so the rim edges are
 shared exactly), depths from a thin-plate spline of the scan points around the rim,
 fitted over the ring's own best-fit plane; where that plane is seen too obliquely or
@@ -168,8 +169,35 @@ class FillResult:
                 "holes": [h.__dict__ | {"centre": list(h.centre)} for h in self.holes]}
 
 
+#: A hole whose rim edges are longer in the view plane than this many scan spacings
+#: (their median) is filled at its rim's own spacing, not the scan's: the scan is
+#: sampled that much more coarsely around it (a perspective depth frame's far range,
+#: 5-25 spacings on a Kinect frame in metric coordinates, whose spacing is its near
+#: range's), and the fill's triangles match the sampling around them. A uniformly
+#: sampled scan's rims are 1.0-1.4 spacings: filled at the scan's spacing.
+LOCAL_SPACING = 2.5
+#: ... when the rim has at least this many edges: a missing triangle or two (3-6 rim
+#: edges, up to 5.6 spacings long on the bunny scans) says little about the sampling.
+LOCAL_RIM_EDGES = 8
+
+
+def _hole_spacing(rim_xy: np.ndarray, spacing: float) -> float:
+    """Return the sample spacing of a hole's fill: its rim edges' median, or the scan's.
+
+    ``rim_xy`` (E, 2, 2) holds the rim edges' ends in the view plane; see
+    :data:`LOCAL_SPACING`.
+    """
+    if len(rim_xy) < LOCAL_RIM_EDGES:
+        return spacing
+    rim = float(np.median(np.linalg.norm(rim_xy[:, 0] - rim_xy[:, 1], axis=1)))
+    return rim if rim > LOCAL_SPACING * spacing else spacing
+
+
 def _fill_one(hole: Hole, ctx: Ctx) -> tuple[Patch, str | None]:
     """Fill one hole; returns the patch and why it is not closed (None if it is)."""
+    spacing = _hole_spacing(ctx.xy[hole.edges], ctx.spacing)
+    if spacing != ctx.spacing:
+        ctx = dataclasses.replace(ctx, spacing=spacing)
     patch = fill_single(hole, ctx)
     if patch.missing:  # a fold: the rim crosses itself, or another layer covers the hole
         layered = fill_layers(hole, ctx)
@@ -251,9 +279,11 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                                       f"larger than max_hole_size ({size:.4g} > {limit:.4g} "
                                       "scan units)"))
             continue
-        v, t, reason = fill_loop(loop, vertices, spacing, scan_points, tree)
+        step = _hole_spacing(np.stack([local[:, :2], np.roll(local[:, :2], -1, axis=0)], 1),
+                             spacing)
+        v, t, reason = fill_loop(loop, vertices, step, scan_points, tree)
         if len(t) and _reuses(t, loop, known):  # the disk fill makes fewer chords
-            v, t, reason = fill_loop(loop, vertices, spacing, scan_points, tree, disk=True)
+            v, t, reason = fill_loop(loop, vertices, step, scan_points, tree, disk=True)
             if len(t) and _reuses(t, loop, known):  # a small loop: chords the mesh lacks
                 v, t = np.zeros((0, 3)), _chords_avoiding(loop, vertices, known)
                 reason = None if len(t) else ("the fill would reuse an edge of the mesh (the "

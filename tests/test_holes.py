@@ -645,3 +645,41 @@ def test_a_gap_pinched_off_the_outer_border_is_closed_a_blob_is_not() -> None:
     # way round), counter-clockwise around a blob (the cell itself): never filled
     assert _winds_as_hole(xyz[cell[::-1]], True) and not _winds_as_hole(xyz[cell], True)
     assert _winds_as_hole(xyz[cell], False)
+
+
+def wedge_scan(tau: float = 21.4, nx: int = 80, ny: int = 30
+               ) -> tuple[am.Scan, np.ndarray]:
+    """A perspective-like scan: its sampling 40 times coarser at one end than the other.
+
+    Sample ``(u, v)`` of the grid sits at ``x = tau (e^(u/tau) - 1)``,
+    ``y = (v - ny/2) e^(u/tau)``: locally square cells whose size grows with ``u``, as a
+    depth frame's footprint grows with depth. Returns the scan with the triangles around
+    ``(u, v) = (68, 15)`` removed (radius 5 samples) and those samples' mask.
+    """
+    u, v = (a.ravel() for a in np.meshgrid(np.arange(nx, dtype=float),
+                                            np.arange(ny, dtype=float)))
+    s = np.exp(u / tau)
+    x, y = tau * (s - 1.0), (v - ny / 2) * s
+    pts = np.c_[x, y, 30.0 * np.sin(x / 150.0) + 20.0 * np.cos(y / 120.0)]
+    faces = grid_faces(nx, ny)
+    gone = (u - 68.0) ** 2 + (v - 15.0) ** 2 < 25.0
+    return am.Scan(pts, faces[~gone[faces].any(axis=1)]), gone
+
+
+def test_a_hole_where_the_scan_is_sparse_is_filled_at_its_own_sampling(monkeypatch) -> None:
+    import asrbf_mesh._holes as H
+
+    scan, gone = wedge_scan()
+    res = fill_holes(scan, seed=0, progress=False)
+    assert res.holes_filled == res.holes_found == 1
+    # about one new vertex per missing sample (69), not the scan's median spacing's
+    # sixteen times as many
+    assert 0.5 * gone.sum() <= res.vertices_added <= 1.5 * gone.sum()
+    truth = point_mesh_distance(scan.points[gone], res.mesh)
+    monkeypatch.setattr(H, "LOCAL_SPACING", np.inf)  # every hole at the scan's spacing
+    dense = fill_holes(scan, seed=0, progress=False)
+    assert dense.vertices_added > 10 * res.vertices_added
+    # as close to the missing samples as the dense fill, within a tenth of the local spacing
+    spacing = np.exp(68.0 / 21.4)
+    assert np.sqrt(np.mean(truth ** 2)) <= np.sqrt(np.mean(
+        point_mesh_distance(scan.points[gone], dense.mesh) ** 2)) + 0.1 * spacing
