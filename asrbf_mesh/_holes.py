@@ -171,10 +171,11 @@ class FillResult:
 
 #: A hole whose rim edges are longer in the view plane than this many scan spacings
 #: (their median) is filled at its rim's own spacing, not the scan's: the scan is
-#: sampled that much more coarsely around it (a perspective depth frame's far range,
-#: 5-25 spacings on a Kinect frame in metric coordinates, whose spacing is its near
-#: range's), and the fill's triangles match the sampling around them. A uniformly
-#: sampled scan's rims are 1.0-1.4 spacings: filled at the scan's spacing.
+#: sampled that much more coarsely around it (a perspective depth frame's far range:
+#: the rims of a Kinect frame in metric coordinates, whose spacing is its near range's,
+#: are 1.1-25 spacings, median 5.7), and the fill's triangles match the sampling around
+#: them. A uniformly sampled scan's rims are 1.0-1.4 spacings: filled at the scan's
+#: spacing.
 LOCAL_SPACING = 2.5
 #: ... when the rim has at least this many edges: a missing triangle or two (3-6 rim
 #: edges, up to 5.6 spacings long on the bunny scans) says little about the sampling.

@@ -56,7 +56,7 @@ TAIL_NOISE = 3.0
 #: Tail refinement: where depths come in levels (a depth camera's quanta), the threshold
 #: is at least this many quanta at the point's depth: a smooth surface through steps one
 #: quantum high misses them by up to half a quantum, plus the camera's own noise (about
-#: a quantum). Measured on the two Kinect frames (``scripts/bench_kinect_mesh.py``):
+#: a quantum). Measured on the two Kinect frames (``scripts/bench_kinect_mesh.py``, seed 0):
 #: K 421 -> 327 and 305 -> 259 (the single network's: 362 and 296), E-bar 0.00137 ->
 #: 0.00140 and 0.00131 -> 0.00133 (single: 0.00289, 0.00277); 1 quantum gave 348 and
 #: 274, 2 quanta 325 and 257.
