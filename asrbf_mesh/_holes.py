@@ -172,8 +172,8 @@ class FillResult:
 #: A hole whose rim edges are longer in the view plane than this many scan spacings
 #: (their median) is filled at its rim's own spacing, not the scan's: the scan is
 #: sampled that much more coarsely around it (a perspective depth frame's far range:
-#: the rims of a Kinect frame in metric coordinates, whose spacing is its near range's,
-#: are 1.1-25 spacings, median 5.7), and the fill's triangles match the sampling around
+#: the rims of Kinect frame desk in metric coordinates, whose spacing is its near
+#: range's, are 1.1-25 spacings, median 5.7), and the fill's triangles match the sampling around
 #: them. A uniformly sampled scan's rims are 1.0-1.4 spacings: filled at the scan's
 #: spacing.
 LOCAL_SPACING = 2.5
