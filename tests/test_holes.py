@@ -562,12 +562,17 @@ def _bays_whole_raster(labels, outside, rho):
 
 
 @pytest.mark.parametrize("case", range(6))
-@pytest.mark.parametrize("max_windows", [64, 0])
+@pytest.mark.parametrize(("max_windows", "coarse_cells"), [(64, None), (0, None), (64, 0),
+                                                           (0, 0)])
 def test_bays_found_in_a_window_match_the_whole_raster(case: int, max_windows: int,
+                                                       coarse_cells: int | None,
                                                        monkeypatch) -> None:
     """The bays' distance transforms run on windows around their cores: the same labels.
 
-    With ``max_windows`` 0, one window around every core (what many cores get).
+    With ``max_windows`` 0, one window around every core (what many cores get); with
+    ``coarse_cells`` 0, the cores looked for on blocks first and measured in boxes
+    around them (what a large raster gets: blocks of 2 x 2 cells for rho 5.5, 3 x 3 for
+    rho 8; rho 3 stays on the whole raster).
     """
     from scipy import ndimage
 
@@ -575,6 +580,8 @@ def test_bays_found_in_a_window_match_the_whole_raster(case: int, max_windows: i
     from asrbf_mesh._footprint import _label_bays
 
     monkeypatch.setattr(footprint, "_MAX_WINDOWS", max_windows)
+    if coarse_cells is not None:
+        monkeypatch.setattr(footprint, "_COARSE_CELLS", coarse_cells)
 
     rng = np.random.default_rng(case)
     y, x = np.mgrid[0:120, 0:160]
@@ -683,3 +690,41 @@ def test_a_hole_where_the_scan_is_sparse_is_filled_at_its_own_sampling(monkeypat
     spacing = np.exp(68.0 / 21.4)
     assert np.sqrt(np.mean(truth ** 2)) <= np.sqrt(np.mean(
         point_mesh_distance(scan.points[gone], dense.mesh) ** 2)) + 0.1 * spacing
+
+
+@pytest.mark.parametrize("case", range(25))
+def test_bays_found_on_blocks_match_the_whole_raster_on_random_rasters(case: int,
+                                                                       monkeypatch) -> None:
+    """Random disks behind slits of every width, specks of coverage: the same bays both ways.
+
+    The boxes grow where a core found on blocks reaches past them through a channel the
+    blocks do not see; rho 4.5 and 6 use blocks of 2 x 2 cells, 7.5 and 12 of 3 x 3.
+    """
+    from scipy import ndimage
+
+    import asrbf_mesh._footprint as footprint
+    from asrbf_mesh._footprint import _label_bays
+
+    rng = np.random.default_rng(case)
+    h, w = rng.integers(100, 260, 2)
+    y, x = np.mgrid[0:h, 0:w]
+    covered = np.ones((h, w), bool)
+    b = int(rng.integers(3, 10))
+    covered[:, :b] = covered[:, -b:] = covered[:b] = covered[-b:] = False
+    for _ in range(int(rng.integers(1, 7))):
+        cy, cx, r = rng.integers(20, h - 20), rng.integers(20, w - 20), rng.integers(6, 30)
+        covered &= np.hypot(y - cy, x - cx) >= r
+        half = int(rng.integers(1, 25)) // 2
+        rows, cols = slice(cy - half, cy + half + 1), slice(cx - half, cx + half + 1)
+        slits = [(rows, slice(cx, None)), (rows, slice(None, cx)), (slice(cy, None), cols),
+                 (slice(None, cy), cols)]
+        covered[slits[int(rng.integers(4))]] = False
+    covered |= rng.random((h, w)) < 0.002
+    labels, _ = ndimage.label(~covered, structure=np.ones((3, 3), bool))
+    outside = frozenset(np.unique(np.concatenate(
+        [labels[0], labels[-1], labels[:, 0], labels[:, -1]])).tolist()) - {0}
+    for rho in (4.5, 6.0, 7.5, 12.0):
+        monkeypatch.setattr(footprint, "_COARSE_CELLS", 10**12)
+        whole = _label_bays(labels, outside, rho)
+        monkeypatch.setattr(footprint, "_COARSE_CELLS", 0)
+        np.testing.assert_array_equal(_label_bays(labels, outside, rho), whole)
