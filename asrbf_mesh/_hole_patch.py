@@ -13,7 +13,7 @@ interpolation, ``blend="harmonic"``), so there is no step at the seam.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -81,10 +81,27 @@ def _thin_out(idx: np.ndarray, xy: np.ndarray, cap: int) -> np.ndarray:
         step *= 1.2
 
 
-def _lowpass(net: Network, hole_size: float, factor: float | None) -> Network:
-    """Drop the neurons narrower than ``factor`` x the hole size from the network."""
+def _lowpass(net: Network, hole_size: float, factor: float | None,
+             cache: dict | None = None) -> Network:
+    """Drop the neurons narrower than ``factor`` x the hole size from the network.
+
+    With ``cache`` (a dict kept for one network), each substrate is made once: the kept
+    neurons are those of the widest n, so n names it (a Kinect frame's 161 fills made
+    one each, 0.2 s).
+    """
     if factor is None:
         return net
+    if cache is not None:
+        widths = cache.get("widths")
+        if widths is None:
+            widths = cache["widths"] = np.concatenate([p.widths for p in net.pieces])
+        key: int | str = "flat" if np.isinf(factor) else int(np.count_nonzero(
+            widths >= factor * hole_size / float(np.sqrt(net.frame.scale[0]
+                                                         * net.frame.scale[1]))))
+        sub = cache.get(key)
+        if sub is None:
+            sub = cache[key] = _lowpass(net, hole_size, factor)
+        return sub
     if np.isinf(factor):  # no substrate: one flat surface (pieces' constants would step)
         return Network(0.0, np.zeros((0, 2)), np.zeros(0), np.zeros(0), net.frame, net.config,
                        None, net.info)
@@ -118,6 +135,7 @@ class Ctx:
     blend: str
     lowpass: float | None
     boundary: np.ndarray  # (B, 2) the scan's boundary edges
+    substrates: dict = field(default_factory=dict)  # :func:`_lowpass`'s cache
 
 
 class Patch(NamedTuple):
@@ -374,10 +392,11 @@ def close_patch(pts: np.ndarray, rim: np.ndarray, seg: np.ndarray, tris: np.ndar
     n_rim = len(rim)
     new_xy = pts[n_rim:]
     # at a fold the network (a height field) averages the layers: no substrate there
-    fnet = _lowpass(ctx.net, size, ctx.lowpass if substrate else np.inf)
+    cut = ctx.lowpass if substrate else np.inf
     if len(new_xy) == 0:
         new_z = np.zeros(0)
     elif ctx.blend == "harmonic":
+        fnet = _lowpass(ctx.net, size, cut, ctx.substrates)
         residual = ctx.depth[rim] - fnet.evaluate(pts[:n_rim])
         new_z = (fnet.evaluate(new_xy)
                  + _harmonic(len(pts), tris, np.arange(n_rim), residual)[n_rim:])
@@ -389,6 +408,7 @@ def close_patch(pts: np.ndarray, rim: np.ndarray, seg: np.ndarray, tris: np.ndar
         new_z = plane(new_xy) if plane is not None else np.full(len(new_xy), np.nan)
         lost = ~np.isfinite(new_z)  # the view ray missed the ring's surface: view plane
         if lost.any():
+            fnet = _lowpass(ctx.net, size, cut, ctx.substrates)
             spline = _residual_spline(ctx, ring, fnet, pts[:n_rim].mean(0), size)
             new_z[lost] = fnet.evaluate(new_xy[lost]) + spline(new_xy[lost])
     kept = np.flatnonzero(np.isin(np.arange(n_rim, len(pts)), tris))

@@ -48,6 +48,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._footprint import point_cloud_faces, signed_areas
+from ._forked import map_forked
 from ._frame import sampling_spacing
 from ._hole_find import Hole, boundary_edges, find_holes
 from ._hole_layers import fill_layers
@@ -212,6 +213,22 @@ def _fill_one(hole: Hole, ctx: Ctx) -> tuple[Patch, str | None]:
     return patch, f"{patch.missing} rim edges could not be closed{why}"
 
 
+def _fill_job(state: tuple[list[Hole], Ctx], i: int) -> tuple[Patch, str | None]:
+    """Fill hole ``i`` of ``state`` (the holes, the context): a job of :func:`map_forked`."""
+    holes, ctx = state
+    return _fill_one(holes[i], ctx)
+
+
+def _loop_job(state: tuple[np.ndarray, np.ndarray, cKDTree],
+              job: tuple[np.ndarray, float]) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """Fill one loop at its spacing in its rim's plane: a job of :func:`map_forked`."""
+    from ._hole_loops import fill_loop
+
+    vertices, scan_points, tree = state
+    loop, step = job
+    return fill_loop(loop, vertices, step, scan_points, tree)
+
+
 def _as_scan(scan: Any) -> Scan:
     """Return the scan to fill: a Scan as it is, a Mesh as its vertices and faces, or points."""
     if isinstance(scan, Scan):
@@ -264,13 +281,20 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
     new_v: list[np.ndarray] = [vertices]
     new_f: list[np.ndarray] = [faces]
     n = len(vertices)
+    # the loops to fill and their spacings; their first fills computed together (forked)
+    loops = [loop for loop in loops if len(loop) >= 3  # else a pinched vertex, not a hole
+             and _in_sorted(_rim_keys(loop), boundary).all()]  # a cycle of boundary edges
+    sizes, steps = [], []
     for loop in loops:
-        if len(loop) < 3:  # a pinched boundary vertex, not a hole
-            continue
-        if not _in_sorted(_rim_keys(loop), boundary).all():  # not a cycle of boundary edges
-            continue
-        local = vertices[loop] @ R
-        size = float(np.linalg.norm(np.ptp(local[:, :2], axis=0)))
+        local = (vertices[loop] @ R)[:, :2]
+        sizes.append(float(np.linalg.norm(np.ptp(local, axis=0))))
+        steps.append(_hole_spacing(np.stack([local, np.roll(local, -1, axis=0)], 1), spacing))
+    todo = [j for j, size in enumerate(sizes) if limit is None or size <= limit]
+    firsts = dict(zip(todo, map_forked(_loop_job, (vertices, scan_points, tree),
+                                       [(loops[j], steps[j]) for j in todo],
+                                       cost=[len(loops[j]) for j in todo]), strict=True))
+    for j, loop in enumerate(loops):
+        size, step = sizes[j], steps[j]
         owner = [i for i, r in enumerate(rims) if r.intersection(loop.tolist())]
         if limit is not None and size > limit:
             if not owner:
@@ -280,9 +304,7 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                                       f"larger than max_hole_size ({size:.4g} > {limit:.4g} "
                                       "scan units)"))
             continue
-        step = _hole_spacing(np.stack([local[:, :2], np.roll(local[:, :2], -1, axis=0)], 1),
-                             spacing)
-        v, t, reason = fill_loop(loop, vertices, step, scan_points, tree)
+        v, t, reason = firsts[j]
         if len(t) and _reuses(t, loop, known):  # the disk fill makes fewer chords
             v, t, reason = fill_loop(loop, vertices, step, scan_points, tree, disk=True)
             if len(t) and _reuses(t, loop, known):  # a small loop: chords the mesh lacks
@@ -608,6 +630,9 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     clashed: dict[int, np.ndarray] = {}  # info index -> rim and patch edge keys
     n_base = len(scan.points)
     n_new = 0
+    todo = [i for i, h in enumerate(holes) if limit is None or h.size <= limit]
+    filled = dict(zip(todo, map_forked(_fill_job, (holes, ctx), todo,
+                                       cost=[len(holes[i].edges) for i in todo]), strict=True))
     for i, h in enumerate(holes):
         rim = np.unique(h.edges)
         centre = tuple(float(v) for v in scan.points[rim].mean(axis=0))
@@ -620,7 +645,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
                                   reason=f"larger than max_hole_size ({h.size:.4g} > "
                                          f"{limit:.4g} scan units)"))
             continue
-        patch, reason = _fill_one(h, ctx)
+        patch, reason = filled[i]
         verts, tris = patch.verts, patch.tris
         if len(tris) == 0:
             infos.append(HoleInfo(**base, filled=False, reason=reason))

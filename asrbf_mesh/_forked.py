@@ -1,0 +1,81 @@
+"""Independent jobs on processes forked from this one, where that pays: hole fills.
+
+A hole's fill is Python-heavy (a triangulation, two splines, many small array steps), so
+threads would queue on the interpreter lock; forked processes share the scan, its trees
+and the network with the parent page by page, copy-on-write, and send back only their
+results. The jobs run in order of the list given, on as many processes as numba may use
+threads (``NUMBA_NUM_THREADS``; a batch worker has 1): the results are the same bits as
+running them here (the network kernels already run serially in a forked child,
+:func:`asrbf_mesh._network_kernels._forked`). Where processes cannot be forked (no
+``fork`` start method, a daemonic process such as a batch worker, a single thread), or
+a worker dies, the jobs run here, one after the other.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import warnings
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+__all__ = ["map_forked"]
+
+#: What the forked workers run: (function, shared state), set while a pool works.
+_JOB: tuple[Callable[[Any, Any], Any], Any] | None = None
+_NOT_YET = object()
+
+
+def _run(items: list[Any]) -> list[Any]:
+    fn, state = _JOB  # type: ignore[misc]  # set by the parent before it forked
+    return [fn(state, item) for item in items]
+
+
+def workers_available() -> int:
+    """How many processes :func:`map_forked` would use (1: it runs the jobs here)."""
+    import numba
+
+    if "fork" not in multiprocessing.get_all_start_methods() \
+            or multiprocessing.current_process().daemon:
+        return 1
+    return max(1, int(numba.get_num_threads()))
+
+
+def map_forked(fn: Callable[[Any, Any], Any], state: Any, items: Sequence[Any], *,
+               cost: Sequence[float] | None = None, min_items: int = 16,
+               per_task: int = 4) -> list[Any]:
+    """Return ``[fn(state, item) for item in items]``, computed on forked processes.
+
+    ``state`` reaches the workers through the fork (it is never pickled); each item and
+    result is. Fewer than ``min_items`` items, or one worker, run here. ``cost`` (one
+    estimate per item) orders the work, the dearest first, in tasks of ``per_task`` items
+    taken by whichever worker is free, so one large job does not finish alone at the end.
+    """
+    global _JOB
+    n = len(items)
+    workers = min(workers_available(), max(n // max(min_items // 2, 1), 1))
+    if workers < 2 or n < min_items:
+        return [fn(state, item) for item in items]
+    order = sorted(range(n), key=lambda i: -cost[i]) if cost is not None else list(range(n))
+    tasks = [order[i:i + per_task] for i in range(0, n, per_task)]
+    out: list[Any] = [_NOT_YET] * n
+    _JOB = (fn, state)
+    try:
+        with warnings.catch_warnings():
+            # Python 3.12 warns that a fork from a process with threads may deadlock: the
+            # threads here (numba's, the kernels' pool) hold no lock the children take
+            warnings.simplefilter("ignore", DeprecationWarning)
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")
+                                     ) as pool:
+                done = pool.map(_run, [[items[i] for i in t] for t in tasks])
+                for task, results in zip(tasks, done, strict=True):
+                    for i, r in zip(task, results, strict=True):
+                        out[i] = r
+    except BrokenProcessPool:  # a worker died (killed, out of memory): the rest here
+        for i in range(n):
+            if out[i] is _NOT_YET:
+                out[i] = fn(state, items[i])
+    finally:
+        _JOB = None
+    return out
