@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import Delaunay, QhullError
@@ -148,7 +149,7 @@ class Footprint:
         cell = 0.5 * spacing
         # the raster spans the points that are not isolated: one stray point far away
         # (left out of the fit too) would otherwise blow the raster up
-        stray = isolated_points(xy)
+        stray = isolated_points(xy, workers=max(1, numba.get_num_threads()))
         box = xy[~stray] if stray.any() and not stray.all() else xy
         lo = box.min(axis=0) - 3 * cell
         nx, ny = (np.ceil((box.max(axis=0) + 3 * cell - lo) / cell).astype(int) + 1)

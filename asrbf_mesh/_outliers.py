@@ -24,7 +24,6 @@ fits exactly as before.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -58,7 +57,7 @@ def robust_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def isolated_points(points: np.ndarray, *, neighbours: int = NEIGHBOURS,
-                    distance_rel: float = DISTANCE_REL) -> np.ndarray:
+                    distance_rel: float = DISTANCE_REL, workers: int = 1) -> np.ndarray:
     """Return the mask of the isolated points of a scan, (N,) bool.
 
     Parameters
@@ -69,6 +68,9 @@ def isolated_points(points: np.ndarray, *, neighbours: int = NEIGHBOURS,
         ``k``: a point is judged by the distance to its ``k``-th nearest other point.
     distance_rel : float
         Threshold, a fraction of the robust bounding-box diagonal (see the module notes).
+    workers : int
+        Threads of the neighbour queries (one: :func:`~asrbf_mesh.fit` runs this beside
+        the segmentation; the footprint of fill-holes, alone, takes numba's count).
 
     Returns
     -------
@@ -93,8 +95,7 @@ def isolated_points(points: np.ndarray, *, neighbours: int = NEIGHBOURS,
     lo, ext = robust_box(p)
     u = (p - lo) / ext  # each axis in units of its robust extent, as the frame does
     diag = float(np.sqrt(u.shape[1]))
-    # the queries on numba's threads (a Kinect frame's 200,000 points: 0.19 -> 0.1 s)
-    dist, _ = cKDTree(u).query(u, k=k + 1, workers=max(1, numba.get_num_threads()))
+    dist, _ = cKDTree(u).query(u, k=k + 1, workers=workers)
     dk = dist[:, -1]
     return dk > max(rel * diag, DENSITY_FACTOR * float(np.median(dk)))
 
