@@ -6,14 +6,15 @@ and the network with the parent page by page, copy-on-write, and send back only 
 results. The jobs run in order of the list given, on as many processes as numba may use
 threads (``NUMBA_NUM_THREADS``; a batch worker has 1): the results are the same bits as
 running them here (the network kernels already run serially in a forked child,
-:func:`asrbf_mesh._network_kernels._forked`). Where processes cannot be forked (no
-``fork`` start method, a daemonic process such as a batch worker, a single thread), or
-a worker dies, the jobs run here, one after the other.
+:func:`asrbf_mesh._network_kernels._forked`). Off Linux (fork is unsafe
+with macOS's system libraries and absent on Windows), in a daemonic process (a batch
+worker), with one thread, or when a worker dies, the jobs run here, one after the other.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import sys
 import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -36,8 +37,8 @@ def workers_available() -> int:
     """How many processes :func:`map_forked` would use (1: it runs the jobs here)."""
     import numba
 
-    if "fork" not in multiprocessing.get_all_start_methods() \
-            or multiprocessing.current_process().daemon:
+    # fork only on Linux: macOS's system libraries are not safe in a forked child
+    if not sys.platform.startswith("linux") or multiprocessing.current_process().daemon:
         return 1
     return max(1, int(numba.get_num_threads()))
 

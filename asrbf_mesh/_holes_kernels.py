@@ -63,7 +63,7 @@ def inside_any(points: np.ndarray, xy: np.ndarray, faces: np.ndarray,
     return _inside_any(points, xy, faces, np.ascontiguousarray(cand))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _coverage(xy, faces, lo, cell, nx, ny):
     """Raster (ny, nx) of cells whose centre lies in (or on) some triangle, in xy."""
     out = np.zeros((ny, nx), np.bool_)
@@ -193,7 +193,7 @@ def once(edges: np.ndarray) -> np.ndarray:
     return _once(e, int(e.max()) + 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _once(e, n):
     m = e.shape[0]
     start = np.zeros(n + 1, np.int64)
@@ -237,7 +237,7 @@ def distance_to_false(mask: np.ndarray) -> np.ndarray:
     return _edt(mask)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _edt(mask):
     ny, nx = mask.shape
     big = float(ny + nx) ** 2 + 1.0  # above any squared distance inside the raster
