@@ -62,21 +62,22 @@ def map_forked(fn: Callable[[Any, Any], Any], state: Any, items: Sequence[Any], 
     tasks = [order[i:i + per_task] for i in range(0, n, per_task)]
     out: list[Any] = [_NOT_YET] * n
     _JOB = (fn, state)
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
     try:
         with warnings.catch_warnings():
             # Python 3.12 warns that a fork from a process with threads may deadlock: the
             # threads here (numba's, the kernels' pool) hold no lock the children take
             warnings.simplefilter("ignore", DeprecationWarning)
-            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")
-                                     ) as pool:
-                done = pool.map(_run, [[items[i] for i in t] for t in tasks])
-                for task, results in zip(tasks, done, strict=True):
-                    for i, r in zip(task, results, strict=True):
-                        out[i] = r
+            done = pool.map(_run, [[items[i] for i in t] for t in tasks])
+            for task, results in zip(tasks, done, strict=True):
+                for i, r in zip(task, results, strict=True):
+                    out[i] = r
     except BrokenProcessPool:  # a worker died (killed, out of memory): the rest here
         for i in range(n):
             if out[i] is _NOT_YET:
                 out[i] = fn(state, items[i])
     finally:
+        # on an interrupt, the tasks not started are dropped, not waited for
+        pool.shutdown(wait=True, cancel_futures=True)
         _JOB = None
     return out
