@@ -49,13 +49,15 @@ def map_forked(fn: Callable[[Any, Any], Any], state: Any, items: Sequence[Any], 
     """Return ``[fn(state, item) for item in items]``, computed on forked processes.
 
     ``state`` reaches the workers through the fork (it is never pickled); each item and
-    result is. Fewer than ``min_items`` items, or one worker, run here. ``cost`` (one
-    estimate per item) orders the work, the dearest first, in tasks of ``per_task`` items
-    taken by whichever worker is free, so one large job does not finish alone at the end.
+    result is. Fewer than ``min_items`` items, or one worker, run here, and each worker
+    gets at least ``min_items / 2`` items (on a Kinect frame, forking two workers took
+    about 25 ms, a small hole's fill about 5 ms). ``cost`` (one estimate per item)
+    orders the work, the dearest first, in tasks of ``per_task`` items taken by whichever
+    worker is free, so one large job does not finish alone at the end.
     """
     global _JOB
     n = len(items)
-    workers = min(workers_available(), max(n // max(min_items // 2, 1), 1))
+    workers = min(workers_available(), n // max(min_items // 2, 1))
     if workers < 2 or n < min_items:
         return [fn(state, item) for item in items]
     order = sorted(range(n), key=lambda i: -cost[i]) if cost is not None else list(range(n))
