@@ -434,6 +434,32 @@ def test_a_hole_punched_into_a_narrow_gap_is_filled_up_to_the_gap() -> None:
         holes_mod.BAY_MOUTH = old
 
 
+def test_a_bay_found_on_blocks_is_filled_with_the_same_bytes(monkeypatch) -> None:
+    """The bay test's scan with its raster's bays looked for on blocks first: the same fill.
+
+    Rasters of over 4 million cells take that path (a Kinect frame); here it is forced.
+    """
+    import asrbf_mesh._footprint as footprint
+
+    scan = grid_scan(franke, nx=70, ny=70, size=(70.0, 70.0))
+    xy = scan.points[:, :2]
+    gap = (np.arange(len(xy)) % 70 == 35) & (xy[:, 1] > 30.0)
+    disk = np.hypot(xy[:, 0] - 35.0, xy[:, 1] - 25.0) < 9.0
+    pins = np.hypot(xy[:, 0] - 15.0, xy[:, 1] - 50.0) < 3.0  # a plain hole beside it
+    keep = np.flatnonzero(~(gap | disk | pins))
+    remap = np.full(len(xy), -1)
+    remap[keep] = np.arange(len(keep))
+    f = remap[scan.faces]
+    holed = am.Scan(scan.points[keep], f[(f >= 0).all(1)])
+    net = am.fit(holed, seed=0, progress=False)
+    whole = fill_holes(holed, net, progress=False)
+    monkeypatch.setattr(footprint, "_COARSE_CELLS", 0)
+    blocks = fill_holes(holed, net, progress=False)
+    assert whole.holes_filled == 2 and whole.vertices_added > 100
+    assert np.array_equal(whole.mesh.vertices, blocks.mesh.vertices)
+    assert np.array_equal(whole.mesh.faces, blocks.mesh.faces)
+
+
 def test_the_protocol_tells_notches_by_the_traced_borders_on_request() -> None:
     """libigl cuts the face map's border at pinch vertices: a notch then counts as enclosed."""
     from asrbf_mesh.evaluate._punch_protocol import punch_protocol
