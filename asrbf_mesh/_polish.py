@@ -495,8 +495,8 @@ def _blas_controller():
 def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
                    atz: np.ndarray, a0: float, centers: np.ndarray, widths: np.ndarray,
                    weights: np.ndarray, support: float, ridge: float, limit: float, *,
-                   base: np.ndarray | None = None, give_back: float = 1.0
-                   ) -> tuple[PolishResult, int] | None:
+                   base: np.ndarray | None = None, give_back: float = 1.0,
+                   extra: float = 0.0) -> tuple[PolishResult, int] | None:
     """Solve the weights from normal equations, then drop the neurons hardly needed.
 
     The weights minimize ``||A w - z||^2 + lam ||w - w_now||^2`` (``A'A = ata``,
@@ -509,8 +509,9 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     dense inverse of ``M``, then rank-one terms); no design matrix is built again.
     With ``base`` (weights ``(a0, a_1 .. a_K)`` of a reference network, e.g. before
     neurons were appended), the removals together raise the sum by at most
-    ``give_back`` times what the solved weights gained over ``base``: the result's sum
-    of squared errors stays below the reference's when ``give_back < 1``.
+    ``give_back`` times what the solved weights gained over ``base``, plus ``extra``
+    (unit depth squared): the result's sum of squared errors stays below the
+    reference's when ``give_back < 1`` and ``extra`` is 0.
     Returns ``(result, neurons dropped)``, the result's ``ebar_after`` and ``residual``
     measured (and its ``ebar_before`` NaN), or None above :data:`IDLE_MAX_NEURONS`
     neurons or when ``M`` is not positive definite.
@@ -539,7 +540,7 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     budget = np.inf
     if base is not None:  # the gain in the sum of squares, from the normal equations
         gain = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
-        budget = give_back * max(gain, 0.0)
+        budget = give_back * max(gain, 0.0) + extra
     dropped = eliminate(inv, w, float(limit), float(budget))
     if not np.all(np.isfinite(w)):
         return None

@@ -201,7 +201,40 @@ def test_the_tails_do_not_chase_a_depth_cameras_quanta(monkeypatch) -> None:
     monkeypatch.setattr(P, "TAIL_QUANTA", 0.0)
     chasing = am.fit(scan, seed=0, progress=False, error_threshold=0.005)
     assert chasing.info["tail_neurons"] > aware.info["tail_neurons"]
-    assert aware.n_neurons < chasing.n_neurons
+    # no point needs a tail here: the idle neurons still go, within the noise's budget
+    monkeypatch.setattr(P, "TAIL_QUANTA", 1.5)
+    monkeypatch.setattr(P, "IDLE_NOISE_SHARE", 0.0)
+    kept = am.fit(scan, seed=0, progress=False, error_threshold=0.005)
+    assert aware.info["tail_neurons"] == 0 == kept.info["tail_neurons"]
+    assert aware.n_neurons < 0.7 * kept.n_neurons
+    assert aware.info["ebar"] < 1.1 * kept.info["ebar"]
+
+
+def test_a_lone_miss_is_no_tail_where_depths_come_in_levels() -> None:
+    from asrbf_mesh._grid_knn import point_grid
+    from asrbf_mesh._pieces import TAIL_SUPPORT, _supported
+
+    # a 20 x 20 grid: one point off alone (a flying pixel), a 3 x 3 patch off together,
+    # a point off the other way from the patch's centre's neighbours, and a point whose
+    # neighbours miss by less than the threshold
+    x, y = np.meshgrid(np.arange(20.0), np.arange(20.0))
+    xy = np.c_[x.ravel(), y.ravel()]
+    res = np.zeros(400)
+    lone, patch, edge = 3 * 20 + 3, [i * 20 + j for i in (10, 11, 12) for j in (10, 11, 12)], 25
+    res[lone] = 5.0
+    res[patch] = 2.0
+    res[11 * 20 + 13] = -2.0  # beside the patch, the other side
+    res[[r * 20 + c for r in (0, 1, 2) for c in (4, 5, 6)]] = 0.5  # under the threshold
+    res[edge] = 2.0
+    at = np.array([lone, 11 * 20 + 11, 10 * 20 + 10, 11 * 20 + 13, edge])
+    got = _supported(xy, res, at, 1.0, point_grid(xy))
+    assert TAIL_SUPPORT == 3
+    # the patch's centre has 8 off with it, its corner 3; the lone point and the one
+    # off the other way none; the point among misses under the threshold none
+    assert got.tolist() == [False, True, True, False, False]
+    limit = np.full(400, 1.0)
+    limit[patch] = 3.0  # a threshold per point (quanta): the patch's points now within
+    assert not _supported(xy, res, at[1:2], limit, point_grid(xy))[0]
 
 
 def test_the_noise_bound_the_tails_skip_on_holds() -> None:
