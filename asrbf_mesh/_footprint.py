@@ -14,6 +14,7 @@ from scipy import ndimage
 from scipy.spatial import Delaunay, QhullError
 
 from . import _holes_kernels as _hk
+from ._grid_knn import nearest_feature
 from ._outliers import isolated_points
 from .errors import ScanError
 
@@ -348,7 +349,9 @@ def _bays_in_box(out: np.ndarray, box: tuple[int, int, int, int],
         # (with no such cell the transform would measure to a phantom one beyond the corner)
         reach = ndimage.distance_transform_edt(~probe) <= rho if probe.any() \
             else np.zeros_like(probe)
-        dist, (wj, wi) = ndimage.distance_transform_edt(~w_inner, return_indices=True)
+        wj, wi = nearest_feature(w_inner)  # scipy's feature transform, bit for bit
+        gj, gi = np.indices(w_inner.shape)
+        dist = np.sqrt(((wj - gj) ** 2 + (wi - gi) ** 2).astype(np.float64))
         here = box_out[win] & ~reach & (dist <= rho + 2.0)
         hj, hi = np.nonzero(here)
         found.append(((hj + win[0].start + j0) * nx + hi + win[1].start + i0,

@@ -6,8 +6,10 @@ certain, so no k-d tree is built and no Python loop runs per point: :func:`knn` 
 ``k`` nearest of some of the points, themselves among them), :func:`plane_slopes` (the
 slope of a least-squares plane through them). :func:`spread` keeps a greedy subset of
 candidates no two of which are closer than a radius, from the candidates' close pairs;
-:func:`bounds` is a point set's box. On the face map's 100,000 points a grid and the 4
-nearest of 50,000 take a few milliseconds where a k-d tree took some 30.
+:func:`bounds` is a point set's box; :func:`nearest_feature` is scipy's feature
+transform of a raster (each cell's nearest True cell), compiled. On the face map's
+100,000 points a grid and the 4 nearest of 50,000 take a few milliseconds where a k-d
+tree took some 30.
 """
 
 from __future__ import annotations
@@ -305,3 +307,90 @@ def spread(xy: np.ndarray, radius: float) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray").astype(np.int64)
     return _greedy(len(xy), pairs.reshape(-1, 2))
+
+
+def nearest_feature(features: np.ndarray) -> np.ndarray:
+    """Return the (row, column) of each cell's nearest True cell of a 2D bool raster.
+
+    The same (2, ny, nx) indices as ``scipy.ndimage.distance_transform_edt(~features,
+    return_distances=False, return_indices=True)``, ties included: scipy's algorithm
+    (a Voronoi pass along each column, then along each row over the columns' nearest,
+    Maurer et al. 2003) with its comparisons, in exact integer arithmetic, compiled and
+    without the interpreter lock (a Kinect frame's piece map, 4 million cells: 0.12 s in
+    scipy, which holds the lock, against a learning piece beside it).
+    A raster without a True cell raises (nothing is nearest).
+
+    Examples
+    --------
+    >>> f = np.zeros((3, 4), dtype=bool)
+    >>> f[0, 0] = f[2, 3] = True
+    >>> nearest_feature(f)[1].tolist()
+    [[0, 0, 0, 3], [0, 0, 3, 3], [0, 3, 3, 3]]
+    """
+    features = np.ascontiguousarray(features, dtype=np.bool_)
+    if features.ndim != 2:
+        raise ValueError(f"nearest_feature: a 2D raster is needed, got {features.ndim}D")
+    if not features.any():
+        raise ValueError("nearest_feature: the raster has no True cell")
+    return _feature_transform(features)
+
+
+@njit(cache=True, nogil=True)
+def _feature_transform(features):
+    ny, nx = features.shape
+    out = np.empty((2, ny, nx), np.int64)
+    rows = out[0]
+    # along each column, the nearest True cell (scipy's first pass; a tie goes to the
+    # one above): the last one above, then the next one below where that is nearer
+    last = np.full(nx, -1, np.int64)
+    for i in range(ny):
+        for j in range(nx):
+            if features[i, j]:
+                last[j] = i
+            rows[i, j] = last[j]
+    last[:] = -1
+    for i in range(ny - 1, -1, -1):
+        for j in range(nx):
+            if features[i, j]:
+                last[j] = i
+            if last[j] >= 0 and (rows[i, j] < 0 or last[j] - i < i - rows[i, j]):
+                rows[i, j] = last[j]
+    # along each row, over the columns' nearest (scipy's _VoronoiFT, its comparisons
+    # in exact integers): the lower envelope of the sites, then each cell's nearest
+    g = np.empty(nx, np.int64)
+    fr = np.empty(nx, np.int64)
+    for i in range(ny):
+        for j in range(nx):
+            fr[j] = rows[i, j]
+        top = -1
+        for q in range(nx):
+            if fr[q] < 0:
+                continue
+            w = fr[q] - i
+            wr = w * w
+            while top >= 1:
+                i1, i2 = g[top], g[top - 1]
+                a, b = i1 - i2, q - i1
+                c = a + b
+                tu, tv = fr[i2] - i, fr[i1] - i
+                if c * (tv * tv) - b * (tu * tu) - a * wr - a * b * c <= 0:
+                    break
+                top -= 1
+            top += 1
+            g[top] = q
+        if top < 0:  # no column of this row holds a True cell: none in the raster
+            continue
+        k = 0
+        for q in range(nx):
+            t0, t1 = fr[g[k]] - i, g[k] - q
+            d1 = t0 * t0 + t1 * t1
+            while k < top:
+                t0, t1 = fr[g[k + 1]] - i, g[k + 1] - q
+                d2 = t0 * t0 + t1 * t1
+                if d1 <= d2:
+                    break
+                d1 = d2
+                k += 1
+            out[0, i, q] = fr[g[k]]
+            out[1, i, q] = g[k]
+    return out

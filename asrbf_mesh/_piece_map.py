@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._grid_knn import bounds
+from ._grid_knn import bounds, nearest_feature
 from ._validate import readonly
 from .errors import ConfigError
 
@@ -103,10 +103,7 @@ class PieceMap:
                 occupied: np.ndarray) -> PieceMap:
         """Return the map whose empty cells take the nearest occupied cell's piece."""
         if not occupied.all():
-            from scipy import ndimage
-
-            near = ndimage.distance_transform_edt(~occupied, return_distances=False,
-                                                  return_indices=True)
+            near = nearest_feature(occupied)  # scipy's feature transform, bit for bit
             raster = raster[near[0], near[1]]
         return cls(lo, cell, raster)
 

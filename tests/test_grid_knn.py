@@ -135,3 +135,44 @@ def test_jump_pairs_are_the_same_with_a_far_stray_point() -> None:
     got = jump_pairs(stray, 1.5, 5.0, 2.0)
     assert len(got) > 40
     np.testing.assert_array_equal(got, jump_pairs(pts, 1.5, 5.0, 2.0))
+
+
+@pytest.mark.parametrize("case", range(12))
+def test_nearest_feature_is_scipys_feature_transform_ties_included(case: int) -> None:
+    from scipy import ndimage
+
+    from asrbf_mesh._grid_knn import nearest_feature
+
+    rng = np.random.default_rng(case)
+    for _ in range(25):
+        ny, nx = (int(v) for v in rng.integers(1, 50, 2))
+        kind = case % 4
+        if kind == 0:  # sparse or dense random cells
+            f = rng.random((ny, nx)) < rng.choice([0.003, 0.03, 0.3, 0.9])
+        elif kind == 1:  # a lattice: cells equidistant from several features everywhere
+            f = np.zeros((ny, nx), dtype=bool)
+            f[int(rng.integers(3))::int(rng.integers(2, 7)),
+              int(rng.integers(3))::int(rng.integers(2, 7))] = True
+        elif kind == 2:  # a row and a broken column
+            f = np.zeros((ny, nx), dtype=bool)
+            f[rng.integers(ny), :] = True
+            f[:, rng.integers(nx)] |= rng.random(ny) < 0.5
+        else:  # disks: a piece map's occupied cells around holes
+            yy, xx = np.mgrid[:ny, :nx]
+            f = np.ones((ny, nx), dtype=bool)
+            for _ in range(3):
+                cy, cx, r = rng.integers(ny), rng.integers(nx), rng.integers(1, 12)
+                f &= (yy - cy) ** 2 + (xx - cx) ** 2 > r * r
+        if not f.any():
+            f[rng.integers(ny), rng.integers(nx)] = True
+        want = ndimage.distance_transform_edt(~f, return_distances=False, return_indices=True)
+        assert np.array_equal(nearest_feature(f), want)
+
+
+def test_nearest_feature_needs_a_2d_raster_with_a_feature() -> None:
+    from asrbf_mesh._grid_knn import nearest_feature
+
+    with pytest.raises(ValueError, match="no True cell"):
+        nearest_feature(np.zeros((3, 3), dtype=bool))
+    with pytest.raises(ValueError, match="2D"):
+        nearest_feature(np.ones(4, dtype=bool))
