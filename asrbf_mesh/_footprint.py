@@ -347,7 +347,7 @@ def _bays_in_box(out: np.ndarray, box: tuple[int, int, int, int],
         w_inner = inner[win]
         probe = fits[win] & ~w_inner  # where the probe from beyond fits
         # (with no such cell the transform would measure to a phantom one beyond the corner)
-        reach = ndimage.distance_transform_edt(~probe) <= rho if probe.any() \
+        reach = _hk.distance_to_false(~probe) <= rho if probe.any() \
             else np.zeros_like(probe)
         wj, wi = nearest_feature(w_inner)  # scipy's feature transform, bit for bit
         gj, gi = np.indices(w_inner.shape)
