@@ -315,10 +315,9 @@ def nearest_feature(features: np.ndarray) -> np.ndarray:
     The same (2, ny, nx) indices as ``scipy.ndimage.distance_transform_edt(~features,
     return_distances=False, return_indices=True)``, ties included: scipy's algorithm
     (a Voronoi pass along each column, then along each row over the columns' nearest,
-    Maurer et al. 2003) with its comparisons, in exact integer arithmetic, compiled and
-    without the interpreter lock (a Kinect frame's piece map, 4 million cells: 0.12 s in
-    scipy, which holds the lock, against a learning piece beside it).
-    A raster without a True cell raises (nothing is nearest).
+    Maurer et al. 2003) with its comparisons, in exact integer arithmetic, compiled (a
+    Kinect frame's piece map, 4 million cells, 4 % of them occupied: 0.09 s, scipy's
+    0.12-0.16 s). A raster without a True cell raises (nothing is nearest).
 
     Examples
     --------
