@@ -486,6 +486,28 @@ def test_a_small_loop_takes_the_chords_the_mesh_lacks() -> None:
     assert len(_chords_avoiding(loop, v, both)) == 0
 
 
+def test_a_loop_whose_every_chord_is_taken_is_closed_by_a_centre_fan() -> None:
+    from asrbf_mesh._hole_loops import boundary_cycles
+    from asrbf_mesh._holes import _centre_fan
+    from asrbf_mesh._surface import grid_faces
+
+    # a 4 x 4 vertex grid with its middle cell's two triangles gone: a quad hole
+    x, y = np.meshgrid(np.arange(4.0), np.arange(4.0))
+    v = np.c_[x.ravel(), y.ravel(), 0.1 * x.ravel() * y.ravel()]
+    faces = grid_faces(4, 4)
+    faces = np.delete(faces, [8, 9], axis=0)  # cell (1, 1): vertices 5, 6, 9, 10
+    loops = sorted(boundary_cycles(faces), key=len)
+    loop = loops[0]
+    assert sorted(loop.tolist()) == [5, 6, 9, 10]
+    new_v, tris = _centre_fan(loop, v)
+    assert new_v.shape == (1, 3) and np.allclose(new_v[0], v[loop].mean(axis=0))
+    closed = np.vstack([faces, np.where(tris < 0, len(v) - tris - 1, tris)])
+    # the quad is gone: only the outer border is left, and every edge runs once each way
+    assert [len(c) for c in boundary_cycles(closed)] == [12]
+    he = np.concatenate([closed[:, [0, 1]], closed[:, [1, 2]], closed[:, [2, 0]]])
+    assert len(np.unique(he, axis=0)) == len(he)
+
+
 def test_the_edge_set_knows_the_mesh_edges_and_the_added_ones() -> None:
     from asrbf_mesh._holes import _KEY, _edge_keys, _EdgeSet
 
