@@ -310,7 +310,7 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
             v, t, reason = fill_loop(loop, vertices, step, scan_points, tree, disk=True)
             if len(t) and _reuses(t, loop, known):  # a small loop: chords the mesh lacks
                 v, t = np.zeros((0, 3)), _chords_avoiding(loop, vertices, known)
-                if len(t) == 0 and len(loop) <= _FAN_MAX:  # every chord is a mesh edge
+                if len(t) == 0 and len(loop) <= _FAN_MAX:  # no triangulation avoids them
                     v, t = _centre_fan(loop, vertices)
                 reason = None if len(t) else ("the fill would reuse an edge of the mesh (the "
                                               "rim touches itself)")
@@ -342,7 +342,8 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
 
 #: Largest loop :func:`_chords_avoiding` triangulates (O(n^3) dynamic programming).
 _DP_MAX = 40
-#: Largest loop closed by :func:`_centre_fan` when every chord of it is a mesh edge.
+#: Largest loop closed by :func:`_centre_fan` when no triangulation of it by chords avoids
+#: the mesh's edges.
 _FAN_MAX = 8
 
 
@@ -350,9 +351,10 @@ def _centre_fan(loop: np.ndarray, vertices: np.ndarray) -> tuple[np.ndarray, np.
     """Close a small loop by one new vertex at its centroid: (that vertex, the fan).
 
     Each triangle holds one rim edge and two new edges to the new vertex (id -1), so no
-    edge of the mesh gets a third face: what closes a gap of a few rim edges whose every
-    chord the mesh already has (a patch's dropped triangles beside a fold left a quad
-    with both diagonals taken: bun090, punch protocol seed 77).
+    edge of the mesh gets a third face: what closes a gap of a few rim edges that no
+    triangulation by chords closes without an edge the mesh already has (a patch's
+    dropped triangles beside a fold left a quad with both diagonals taken: bun090,
+    punch protocol seed 77).
     """
     from ._hole_loops import _oriented
 
