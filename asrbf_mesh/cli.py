@@ -236,6 +236,11 @@ def _show_reconstruct(d: dict[str, Any], args: argparse.Namespace) -> None:
 
 def _show_fill_grid(d: dict[str, Any], args: argparse.Namespace) -> None:
     skipped = [h for h in d["holes"] if not h["filled"]]
+    if "lattice" in d:
+        lat = d["lattice"]
+        print(f"{args.scan}: a depth frame's mesh: its vertices on a {lat['cols']} x "
+              f"{lat['rows']} pixel lattice (fx {lat['fx']:.4g}, fy {lat['fy']:.4g}); "
+              "filled on it as a depth image (--as-mesh: in the view plane)")
     print(f"{args.scan}: {d['holes_found']} holes found (no-data regions open to the border "
           f"left as they are: {d['border_cells']:,} cells), {d['holes_filled']} filled, "
           f"{len(skipped)} skipped")
@@ -252,7 +257,9 @@ def _show_fill_grid(d: dict[str, Any], args: argparse.Namespace) -> None:
         print(f"  ... {len(rest):,} smaller holes ({sum(h['cells'] for h in rest):,} cells, "
               f"{sum(not h['filled'] for h in rest)} skipped)")
     extra = f" and {d['mask']}" if d.get("mask") else ""
-    print(f"wrote {d['output']}{extra}: {d['cells_filled']:,} cells filled in "
+    added = (f" (+{d['vertices_added']:,} vertices, +{d['faces_added']:,} faces, added "
+             "vertices have quality 1)" if "lattice" in d else "")
+    print(f"wrote {d['output']}{extra}: {d['cells_filled']:,} cells filled{added} in "
           f"{d['seconds']:.2f} s (fit {d['fit_seconds']:.2f} s)")
 
 
@@ -472,6 +479,10 @@ def _fill_holes_options(h: argparse.ArgumentParser, full: bool = True) -> None:
                         "times as wide as the hole; 0 keeps every neuron [default: 1]")
     h.add_argument("--mask", help="gridded input: also write a mask image of the filled "
                                   "cells (uint8, 255 = filled)")
+    h.add_argument("--as-mesh", dest="lattice", action="store_false",
+                   help="a mesh made from one depth frame (vertices on a pixel lattice) is "
+                        "filled on that lattice, as its depth image; this fills it as any "
+                        "mesh, in the view plane")
     _add_pieces(h, " (for the fit made here)")
     _add_range(h)
     if full:

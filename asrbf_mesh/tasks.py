@@ -218,8 +218,10 @@ def reconstruct(network: str | os.PathLike, output: str | os.PathLike, *,
 
 
 def _check_fill_holes(*, network: Any, max_hole_size: Any, blend: str, lowpass_rel: float,
-                      seed: int, progress: bool | None, pieces: Any = "auto") -> None:
+                      seed: int, progress: bool | None, pieces: Any = "auto",
+                      lattice: Any = True) -> None:
     check_choice(pieces, "pieces", PIECES)
+    check_bool(lattice, "lattice")
     check_choice(blend, "blend", BLENDS)
     check_float(lowpass_rel, "lowpass_rel")
     check_seed(seed)
@@ -230,7 +232,7 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
                network: str | os.PathLike | None = None, max_hole_size: str | float | None = None,
                blend: str = "thin-plate", lowpass_rel: float = 1.0, seed: int = 0,
                progress: bool | None = None, pieces: str = "auto",
-               mask: str | os.PathLike | None = None,
+               mask: str | os.PathLike | None = None, lattice: bool = True,
                range_options: dict[str, Any] | None = None) -> dict[str, Any]:
     """``asrbf fill-holes``: fill a scan's holes from its network (fitted if not given).
 
@@ -239,13 +241,18 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
     grid is filled on its grid (:func:`~asrbf_mesh._grid_fill.fill_grid`) and written
     in kind when ``output`` has a grid suffix (``mask``: also an image of the filled
     cells); a LAS/LAZ cloud is written back as the input's points plus the fill's,
-    flagged synthetic, when ``output`` is a LAS/LAZ file.
+    flagged synthetic, when ``output`` is a LAS/LAZ file. A mesh made from one depth
+    frame (its vertices on a pixel lattice, :func:`~asrbf_mesh._lattice.find_lattice`)
+    is filled on that lattice as its depth image would be, unless ``lattice=False``,
+    a network is given or ``blend`` / ``lowpass_rel`` are not their defaults (options
+    of the mesh fill).
     """
     from ._holes import fill_holes as fill
     from ._range_io import RangeOptions, is_range_path, load_range
 
     _check_fill_holes(network=network, max_hole_size=max_hole_size, blend=blend,
-                      lowpass_rel=lowpass_rel, seed=seed, progress=progress, pieces=pieces)
+                      lowpass_rel=lowpass_rel, seed=seed, progress=progress, pieces=pieces,
+                      lattice=lattice)
     opts = RangeOptions.of(range_options)
     kind = is_range_path(scan, opts)
     if mask is not None and kind != "grid":
@@ -260,6 +267,13 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
     if kind == "grid":
         return _fill_grid_task(source, net, out, mask, max_hole_size, seed, pieces, progress,
                                (scan, network))
+    if not kind and lattice and net is None and blend == "thin-plate" and lowpass_rel == 1.0:
+        from ._lattice import find_lattice
+
+        lat = find_lattice(data)
+        if lat is not None:
+            return _fill_lattice_task(data, lat, out, max_hole_size, seed, pieces, progress,
+                                      (scan,))
     res = fill(data, net, max_hole_size=max_hole_size, blend=blend,
                lowpass_rel=None if lowpass_rel <= 0 else lowpass_rel, seed=seed,
                progress=progress, pieces=pieces)
@@ -305,6 +319,24 @@ def _fill_grid_task(grid: Any, net: Network | None, out: Path, mask: Any, max_ho
             write_mask(grid, res.z_filled, mask)
     return jsonable(res.to_dict() | {"output": str(out)}
                     | ({"mask": str(mask)} if mask is not None else {}))
+
+
+def _fill_lattice_task(scan: Any, lat: Any, out: Path, max_hole_size: Any, seed: int,
+                       pieces: str, progress: bool | None, inputs: tuple) -> dict[str, Any]:
+    """Fill a depth frame's mesh on its pixel lattice; write the mesh with the fill."""
+    from ._grid_fill import fill_grid
+    from ._lattice import lattice_grid, merge_fill
+
+    res = fill_grid(lattice_grid(scan, lat), None, max_hole_size=max_hole_size, seed=seed,
+                    pieces=pieces, progress=progress)
+    mesh = merge_fill(scan, lat, res.z_filled, res.filled_mask)
+    save_mesh(mesh, out, overwrite_inputs=inputs)
+    fx, fy, cx, cy = lat.intrinsics
+    return jsonable(res.to_dict() | {
+        "output": str(out), "vertices_added": mesh.n_vertices - scan.n_points,
+        "faces_added": mesh.n_faces - len(scan.faces),
+        "lattice": {"rows": lat.shape[0], "cols": lat.shape[1], "fx": fx, "fy": fy,
+                    "cx": cx, "cy": cy}})
 
 
 # --------------------------------------------------------------------------- lod

@@ -26,6 +26,8 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _bench_common import machine, table, write_section  # noqa: E402
@@ -37,6 +39,56 @@ import asrbf_mesh as am  # noqa: E402
 
 #: Fits per model, alternating; each model's fastest is reported.
 FIT_REPS = 5
+#: Whole-process runs of each command, alternating; every run is reported (min-max).
+PROCESS_REPS = 3
+
+_POISSON = """
+import sys
+from asrbf_mesh._io import load_scan, save_mesh
+from asrbf_mesh.evaluate._meshlab import screened_poisson
+save_mesh(screened_poisson(load_scan(sys.argv[1]).points, depth=9), sys.argv[2])
+"""
+
+
+def whole_process(scan: am.Scan, folder: Path) -> dict:
+    """Wall time of whole processes on the frame's PLY: ``asrbf fill-holes`` and Poisson.
+
+    The frame is written as a binary PLY in float32 OpenCV camera coordinates (+y down,
+    +z forward, what Open3D writes). Each of ``asrbf fill-holes`` (the frame filled on
+    its pixel lattice), ``asrbf fill-holes --as-mesh`` (filled as any mesh) and a Python
+    process reading the PLY, running screened Poisson at depth 9 (the hole benchmark's
+    peer) and writing its mesh runs :data:`PROCESS_REPS` times, alternating.
+    """
+    import json
+    import subprocess
+
+    src = folder / "frame.ply"
+    p = (scan.points * [1.0, -1.0, -1.0]).astype(np.float32)
+    with open(src, "wb") as fh:
+        fh.write((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(p)}\n"
+                  "property float x\nproperty float y\nproperty float z\n"
+                  f"element face {len(scan.faces)}\nproperty list uchar int vertex_indices\n"
+                  "end_header\n").encode())
+        fh.write(p.astype("<f4").tobytes())
+        rec = np.zeros(len(scan.faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
+        rec["n"], rec["v"] = 3, scan.faces[:, ::-1]
+        fh.write(rec.tobytes())
+    exe = Path(sys.executable).parent / "asrbf"  # the installed command, as a user runs it
+    asrbf = [str(exe)] if exe.exists() else [sys.executable, "-m", "asrbf_mesh.cli"]
+    cmds = {"lattice": asrbf + ["fill-holes", str(src), "-o", str(folder / "a.ply"), "--json"],
+            "mesh": asrbf + ["fill-holes", str(src), "-o", str(folder / "m.ply"), "--json",
+                             "--as-mesh"],
+            "poisson": [sys.executable, "-c", _POISSON, str(src), str(folder / "p.ply")]}
+    secs: dict[str, list[float]] = {k: [] for k in cmds}
+    out: dict = {}
+    for _ in range(PROCESS_REPS):
+        for k, cmd in cmds.items():
+            t0 = time.perf_counter()
+            run = subprocess.run(cmd, capture_output=True, text=True, check=True)
+            secs[k].append(time.perf_counter() - t0)
+            if k != "poisson":
+                out[k] = json.loads(run.stdout)
+    return {"secs": secs, "lattice": out["lattice"], "mesh": out["mesh"]}
 
 
 def best(fn, runs: int) -> tuple[float, object]:
@@ -84,12 +136,26 @@ def main(argv: list[str] | None = None) -> int:
     if folder is None or not folder.is_dir():
         print("no TUM frames: pass --tum DIR or set ASRBF_TUM_DIR", file=sys.stderr)
         return 2
+    import tempfile
+
     t0 = time.perf_counter()
-    rows, model_rows = [], []
-    with warnings.catch_warnings():
+    rows, model_rows, proc_rows = [], [], []
+    with warnings.catch_warnings(), tempfile.TemporaryDirectory() as tmp:
         warnings.simplefilter("ignore")
         for name, grid in tum_frames(folder).items():
             scan = grid.to_scan()
+            w = whole_process(scan, Path(tmp))
+            lat, mesh = w["lattice"], w["mesh"]
+
+            def span(k: str, w: dict = w) -> str:
+                return f"{min(w['secs'][k]):.2f}-{max(w['secs'][k]):.2f}"
+
+            proc_rows.append([name, f"{lat['lattice']['cols']} x {lat['lattice']['rows']}",
+                              f"{lat['holes_filled']} of {lat['holes_found']} / "
+                              f"{lat['vertices_added']:,}", span("lattice"),
+                              f"{mesh['holes_filled']} of {mesh['holes_found']} / "
+                              f"{mesh['vertices_added']:,}", span("mesh"), span("poisson")])
+            print(name, w["secs"], flush=True)
             r = run_frame(scan)
             model_rows += pieces_rows(name, scan, args.seeds)
             print(name, r, flush=True)
@@ -117,7 +183,19 @@ def main(argv: list[str] | None = None) -> int:
             "network-issue-14-seeds-0-1-2), `scripts/bench_pieces.py`'s measure: the "
             "default reconstruction against the frame's mesh, both ways, % of the "
             "diagonal; each cell the median over the seeds (worst seed)):\n\n"
-            + table(PIECES_HEADERS, model_rows) + "\n")
+            + table(PIECES_HEADERS, model_rows) + "\n\n"
+            "Whole processes on the frame written as a PLY (float32, OpenCV camera "
+            "coordinates, as Open3D writes it; wall time of "
+            f"{PROCESS_REPS} runs each, alternating, min-max, reading and writing "
+            "included): `asrbf fill-holes frame.ply` recognises the frame's pixel lattice "
+            "and fills it as its depth image (enclosed no-data cells; the shadows beside "
+            "depth edges from their far side); `--as-mesh` fills it as any mesh (every "
+            "enclosed gap of its footprint in the view plane, the depth edges' shadows "
+            "too); screened Poisson (depth 9): a Python process reading the PLY, "
+            "reconstructing and writing the surface.\n\n"
+            + table(["frame", "lattice", "fill-holes: holes filled / vertices added",
+                     "fill-holes s", "--as-mesh: holes filled / vertices added",
+                     "--as-mesh s", "Poisson s"], proc_rows) + "\n")
     print(body)
     if not args.no_write:
         write_section("kinect-mesh", body)
