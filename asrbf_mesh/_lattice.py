@@ -72,17 +72,22 @@ def _axis(t: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, float, float] |
     if not (np.isfinite(step) and step > 0):
         return None
     lo = float(t.min())
-    k = np.rint((t - lo) / step)
-    if np.abs((t - lo) / step - k).max() > 0.25:  # not even near a lattice: stop early
+    f = (t - lo) / step
+    if not f.max() <= _MAX_CELLS:  # more lattice lines than any grid made here
+        return None
+    k = np.rint(f)
+    if np.abs(f - k).max() > 0.25:  # not even near a lattice: stop early
         return None
     A = np.column_stack([np.ones_like(k), k])
     (t0, step), *_ = np.linalg.lstsq(A, t, rcond=None)
     if not step > 0:
         return None
-    k = np.rint((t - t0) / step)
-    if np.abs((t - t0) / step - k).max() > _ON_LATTICE:
+    f = (t - t0) / step
+    k = np.rint(f)
+    if np.abs(f - k).max() > _ON_LATTICE:
         return None
-    return k.astype(np.int64), float(t0), float(step)
+    first = k.min()  # the first lattice line is 0
+    return (k - first).astype(np.int64), float(t0 + first * step), float(step)
 
 
 def find_lattice(scan: Scan) -> Lattice | None:

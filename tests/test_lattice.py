@@ -167,3 +167,11 @@ def test_cli_says_it_read_a_frame(capsys, tmp_path: Path) -> None:
     out = capsys.readouterr().out
     assert "84 x 56 pixel lattice (fx 300, fy 310)" in out
     assert f"{int(voids.sum())} cells filled (+{int(voids.sum())} vertices" in out
+
+
+def test_far_off_vertices_are_no_lattice() -> None:
+    grid, _, _ = _frame()
+    scan = grid.to_scan()
+    p = scan.points.copy()
+    p[5, 0] = 1e30 * p[5, 2]  # one ray at an absurd angle: no grid of 1e33 columns
+    assert find_lattice(Scan(p, scan.faces)) is None
