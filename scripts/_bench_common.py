@@ -53,8 +53,14 @@ def median_run(runs: list[dict], key: str = "ebar") -> dict:
 
 
 def median_worst(values: list[float], fmt: str, worst: Callable = max) -> str:
-    """A table cell: the median of ``values`` and, in brackets, the worst of them."""
-    return f"{format(statistics.median(values), fmt)} ({format(worst(values), fmt)})"
+    """A table cell: the median of ``values`` and, in brackets, the worst of them.
+
+    Counts (integers) take the lower median of an even number of values: a value one
+    of the runs had, not a half neuron.
+    """
+    counts = all(isinstance(v, (int, np.integer)) for v in values)
+    mid = statistics.median_low(values) if counts else statistics.median(values)
+    return f"{format(mid, fmt)} ({format(worst(values), fmt)})"
 
 
 def table(headers: list[str], rows: list[list]) -> str:

@@ -141,6 +141,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--peers", action="store_true")
     ap.add_argument("--workers", type=int, default=max(1, min(2, os.cpu_count() or 1)))
     args = ap.parse_args(argv)
+    if args.peers:  # a peer that cannot run would score as the punched scan itself
+        try:
+            import pymeshfix  # noqa: F401
+            import pyvista  # noqa: F401
+        except ImportError as exc:
+            ap.exit(2, f"--peers needs the bench extra (pip install -e '.[bench]'): {exc}\n")
     names = list(scans())
     t0 = time.perf_counter()
     done, bad = run(names, args.seeds, args.poisson, args.pieces, args.workers, args.peers)

@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
             "run.\n\n" + table(head, rows) + "\n\n"
             f"The issue 14 figures on the frames, seeds {', '.join(map(str, args.seeds))} "
             "(the columns of the [piecewise model's table](#piecewise-model-vs-the-single-"
-            "network-issue-14-seeds-0-1-2), `scripts/bench_pieces.py`'s measure: the "
+            "network-issue-14), `scripts/bench_pieces.py`'s measure: the "
             "default reconstruction against the frame's mesh, both ways, % of the "
             "diagonal; each cell the median over the seeds (worst seed)):\n\n"
             + table(PIECES_HEADERS, model_rows) + "\n\n"

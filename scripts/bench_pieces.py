@@ -58,9 +58,10 @@ def main(argv: list[str] | None = None) -> int:
     for name, scan in found.items():
         rows += _rows(name, scan, args.seeds)
     seeds = ", ".join(map(str, args.seeds))
-    body = (f"## Piecewise model vs the single network (issue 14): seeds {seeds}\n\n"
+    body = ("## Piecewise model vs the single network (issue 14)\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
-            f"`python scripts/bench_pieces.py` ({time.perf_counter() - t0:.0f} s)._\n\n"
+            f"`python scripts/bench_pieces.py --seeds {' '.join(map(str, args.seeds))}` "
+            f"({time.perf_counter() - t0:.0f} s)._ Seeds {seeds}.\n\n"
             "Single: `am.fit(scan, pieces=1)` (`--pieces 1`, the paper's model). Pieces: "
             "`am.fit(scan)` (`--pieces auto`, the default): the scan cut by `am.segment` "
             "(defaults), one network per piece in the whole scan's unit cube with the same "

@@ -46,9 +46,15 @@ CHILD = textwrap.dedent("""
         f = remap[faces]
         scan = am.Scan(pts[keep], f[(f >= 0).all(axis=1)])
     res = am.fill_holes(scan, seed=seed, progress=False)
+    F = res.mesh.faces
+    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    _, uses = np.unique(e, axis=0, return_counts=True)
     print(json.dumps({"found": res.holes_found, "filled": res.holes_filled,
                       "reasons": [h.reason for h in res.holes if not h.filled],
-                      "finite": bool(np.isfinite(res.mesh.vertices).all())}))
+                      "finite": bool(np.isfinite(res.mesh.vertices).all()),
+                      "repeated": int(np.sum((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2])
+                                             | (F[:, 0] == F[:, 2]))),
+                      "edge_faces": int(uses.max())}))
 """)
 
 
@@ -61,6 +67,8 @@ def test_fill_holes_never_crashes_and_reports_every_hole(kind: str, seed: int) -
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["finite"]
     assert out["found"] >= 1
+    # no triangle with a vertex twice, no edge with a third face (the scans have none)
+    assert out["repeated"] == 0 and out["edge_faces"] <= 2
     # every hole is filled or reported with its reason
     assert len(out["reasons"]) == out["found"] - out["filled"]
     assert all(isinstance(r, str) and r for r in out["reasons"])

@@ -475,7 +475,7 @@ def test_the_protocol_tells_notches_by_the_traced_borders_on_request() -> None:
 
 
 def test_a_small_loop_takes_the_chords_the_mesh_lacks() -> None:
-    from asrbf_mesh._holes import _KEY, _chords_avoiding
+    from asrbf_mesh._hole_close import _KEY, _chords_avoiding
 
     v = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
     loop = np.array([0, 1, 2, 3])
@@ -487,8 +487,8 @@ def test_a_small_loop_takes_the_chords_the_mesh_lacks() -> None:
 
 
 def test_a_loop_whose_every_chord_is_taken_is_closed_by_a_centre_fan() -> None:
+    from asrbf_mesh._hole_close import _centre_fan
     from asrbf_mesh._hole_loops import boundary_cycles
-    from asrbf_mesh._holes import _centre_fan
     from asrbf_mesh._surface import grid_faces
 
     # a 4 x 4 vertex grid with its middle cell's two triangles gone: a quad hole
@@ -509,7 +509,7 @@ def test_a_loop_whose_every_chord_is_taken_is_closed_by_a_centre_fan() -> None:
 
 
 def test_the_edge_set_knows_the_mesh_edges_and_the_added_ones() -> None:
-    from asrbf_mesh._holes import _KEY, _edge_keys, _EdgeSet
+    from asrbf_mesh._hole_close import _KEY, _edge_keys, _EdgeSet
 
     faces = np.array([[0, 1, 2], [2, 1, 3]])
     known = _EdgeSet(np.unique(_edge_keys(faces)))
@@ -776,3 +776,34 @@ def test_bays_found_on_blocks_match_the_whole_raster_on_random_rasters(case: int
         whole = _label_bays(labels, outside, rho)
         monkeypatch.setattr(footprint, "_COARSE_CELLS", 0)
         np.testing.assert_array_equal(_label_bays(labels, outside, rho), whole)
+
+
+def test_a_loop_through_a_pinch_vertex_is_closed_cycle_by_cycle() -> None:
+    from asrbf_mesh._hole_close import _KEY, _centre_fan, _close_small, _edge_keys, _fits
+    from asrbf_mesh._hole_loops import boundary_cycles
+    from asrbf_mesh._surface import grid_faces
+
+    # a 5 x 5 vertex grid without cells (1, 1) and (2, 2): two quad gaps meeting at
+    # vertex 12, one loop of 8 edges that passes it twice
+    x, y = np.meshgrid(np.arange(5.0), np.arange(5.0))
+    v = np.c_[x.ravel(), y.ravel(), 0.05 * x.ravel() ** 2]
+    faces = grid_faces(5, 5)
+    cells = [(1, 1), (2, 2)]
+    drop = [2 * (r * 4 + c) + k for r, c in cells for k in (0, 1)]
+    faces = np.delete(faces, drop, axis=0)
+    assert sorted(len(c) for c in boundary_cycles(faces)) == [4, 4, 16]
+    loop = np.array([12, 7, 6, 11, 12, 17, 18, 13])  # both gaps, as one walk through 12
+    keys = np.unique(_edge_keys(faces))
+    # one fan around the whole loop gives the edge to the pinch vertex four faces
+    _, fan = _centre_fan(loop, v)
+    assert not _fits(fan, loop, keys)
+    # both diagonals of both quads taken: chords cannot close them, fans per cycle do
+    taken = np.unique(np.r_[keys, [6 * _KEY + 12, 7 * _KEY + 11, 12 * _KEY + 18,
+                                   13 * _KEY + 17]])
+    new_v, tris = _close_small(loop, v, taken)
+    assert len(new_v) == 2 and sorted(np.unique(tris[tris < 0]).tolist()) == [-2, -1]
+    assert _fits(tris, loop, taken)
+    closed = np.vstack([faces, np.where(tris < 0, len(v) - tris - 1, tris)])
+    assert [len(c) for c in boundary_cycles(closed)] == [16]  # the outer border only
+    he = np.concatenate([closed[:, [0, 1]], closed[:, [1, 2]], closed[:, [2, 0]]])
+    assert len(np.unique(he, axis=0)) == len(he)
