@@ -254,8 +254,6 @@ def _as_scan(scan: Any) -> Scan:
     return Scan(check_points(scan, "scan"))
 
 
-
-
 def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                  rims: list[set[int]], hole_keys: np.ndarray, ccw: bool,
                  scan_points: np.ndarray, R: np.ndarray, spacing: float,
