@@ -90,30 +90,15 @@ _FAN_MAX = 8
 
 def _close_small(loop: np.ndarray, vertices: np.ndarray,
                  known: _EdgeSet | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Close a small loop by chords the mesh lacks, else by a centre fan: (new vertices, T).
+    """Close a small simple loop by chords the mesh lacks, else by a centre fan.
 
-    A loop that passes a vertex twice (two gaps pinched together there) is closed cycle
-    by cycle (:func:`~asrbf_mesh._hole_loops.simple_cycles`): chords across the pinch
-    made a triangle with a vertex twice, and one fan around both cycles gave the edge
-    from its centre to the pinch four faces (Kinect frame desk2 as a float32 PLY, five
-    such edges). New vertices are numbered -1, -2, ... as :func:`_centre_fan`'s. All or
-    nothing: when one cycle cannot be closed, nothing is.
+    Returns (new vertices, triangles), empty when neither closes it. A loop that passes a
+    vertex twice comes here one cycle at a time (:func:`_fill_cycles`).
     """
-    cycles = [loop] if len(np.unique(loop)) == len(loop) else simple_cycles(loop)
-    new_v: list[np.ndarray] = []
-    tris: list[np.ndarray] = []
-    for cycle in cycles:
-        t = _chords_avoiding(cycle, vertices, known)
-        if len(t) == 0 and len(cycle) <= _FAN_MAX:  # no triangulation avoids them
-            v, t = _centre_fan(cycle, vertices)
-            t = np.where(t < 0, t - len(new_v), t)
-            new_v.append(v)
-        if len(t) == 0:
-            return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-        tris.append(t)
-    if not tris:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    return (np.vstack(new_v) if new_v else np.zeros((0, 3))), np.vstack(tris)
+    t = _chords_avoiding(loop, vertices, known)
+    if len(t) == 0 and len(loop) <= _FAN_MAX:  # no triangulation avoids them
+        return _centre_fan(loop, vertices)
+    return np.zeros((0, 3)), t
 
 
 def _centre_fan(loop: np.ndarray, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

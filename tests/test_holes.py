@@ -779,7 +779,9 @@ def test_bays_found_on_blocks_match_the_whole_raster_on_random_rasters(case: int
 
 
 def test_a_loop_through_a_pinch_vertex_is_closed_cycle_by_cycle() -> None:
-    from asrbf_mesh._hole_close import _KEY, _centre_fan, _close_small, _edge_keys, _fits
+    from scipy.spatial import cKDTree
+
+    from asrbf_mesh._hole_close import _KEY, _centre_fan, _edge_keys, _fill_cycles, _fits
     from asrbf_mesh._hole_loops import boundary_cycles
     from asrbf_mesh._surface import grid_faces
 
@@ -800,7 +802,8 @@ def test_a_loop_through_a_pinch_vertex_is_closed_cycle_by_cycle() -> None:
     # both diagonals of both quads taken: chords cannot close them, fans per cycle do
     taken = np.unique(np.r_[keys, [6 * _KEY + 12, 7 * _KEY + 11, 12 * _KEY + 18,
                                    13 * _KEY + 17]])
-    new_v, tris = _close_small(loop, v, taken)
+    new_v, tris, reason = _fill_cycles(loop, v, 1.0, v, cKDTree(v), taken, np.eye(3), True)
+    assert reason is None
     assert len(new_v) == 2 and sorted(np.unique(tris[tris < 0]).tolist()) == [-2, -1]
     assert _fits(tris, loop, taken)
     closed = np.vstack([faces, np.where(tris < 0, len(v) - tris - 1, tris)])
