@@ -136,6 +136,7 @@ class Ctx:
     lowpass: float | None
     boundary: np.ndarray  # (B, 2) the scan's boundary edges
     substrates: dict = field(default_factory=dict)  # :func:`_lowpass`'s cache
+    piece: np.ndarray | None = None  # each scan vertex's piece (None: one piece)
 
 
 class Patch(NamedTuple):
@@ -404,8 +405,11 @@ def close_patch(pts: np.ndarray, rim: np.ndarray, seg: np.ndarray, tris: np.ndar
         near, _ = cKDTree(pts[:n_rim]).query(
             ctx.xy[ring], distance_upper_bound=max(_RING * ctx.spacing, _FILL_REL * size))
         ring = ring[np.isfinite(near)] if np.isfinite(near).sum() >= 3 else ring
-        plane = _plane_depth(ctx, ring, pts[:n_rim].mean(0), size)
-        new_z = plane(new_xy) if plane is not None else np.full(len(new_xy), np.nan)
+        new_z = np.full(len(new_xy), np.nan)
+        for part_ring, part in _sides(ctx, rim, seg, ring, new_xy):
+            plane = _plane_depth(ctx, part_ring, pts[:n_rim].mean(0), size)
+            if plane is not None:
+                new_z[part] = plane(new_xy[part])
         lost = ~np.isfinite(new_z)  # the view ray missed the ring's surface: view plane
         if lost.any():
             fnet = _lowpass(ctx.net, size, cut, ctx.substrates)
@@ -416,6 +420,61 @@ def close_patch(pts: np.ndarray, rim: np.ndarray, seg: np.ndarray, tris: np.ndar
     order[:n_rim] = rim
     order[n_rim + kept] = -(np.arange(len(kept)) + 1)
     return np.column_stack([new_xy[kept], new_z[kept]]), order[tris], missing
+
+
+#: A piece takes its own side of a hole when it holds at least this many of the hole's
+#: rim vertices and of its ring's points (fewer: its points join the others' ring).
+_SIDE_RIM = 4
+_SIDE_RING = 12
+
+
+def _sides(ctx: Ctx, rim: np.ndarray, seg: np.ndarray, ring: np.ndarray,
+           new_xy: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Split a hole's fill between the pieces its rim runs along: (ring, new vertices).
+
+    A hole punched across an occlusion cliff (a near piece in front of a far one, no
+    triangle across the jump) has a rim on both; one thin plate through both rings
+    ramps across the hole, off both surfaces. Each new vertex goes to the piece of its
+    nearest rim vertex and is shaped from that piece's ring alone: each side continues
+    its own surface, and the triangles where the sides meet stitch them as a wall, as
+    the reconstruction's walls between pieces. Pieces the rim itself joins (a rim edge
+    from one to the other: the cut ran along a crease, not a jump) count as one side.
+    One side: the whole ring, every vertex. ``seg`` holds the rim edges (indices into
+    ``rim``).
+    """
+    everything = [(ring, np.arange(len(new_xy)))]
+    if ctx.piece is None or len(new_xy) == 0:
+        return everything
+    rim_piece, ring_piece = ctx.piece[rim], ctx.piece[ring]
+    ids, counts = np.unique(rim_piece, return_counts=True)
+    big = [int(g) for g, c in zip(ids, counts, strict=True)
+           if c >= _SIDE_RIM and np.count_nonzero(ring_piece == g) >= _SIDE_RING]
+    if len(big) < 2:
+        return everything
+    # pieces joined by a rim edge are one side (union-find over the big pieces)
+    side_of = {g: g for g in big}
+
+    def root(g: int) -> int:
+        while side_of[g] != g:
+            g = side_of[g]
+        return g
+
+    for a, b in rim_piece[seg].tolist():
+        if a != b and a in side_of and b in side_of:
+            side_of[root(a)] = root(b)
+    if len({root(g) for g in big}) < 2:
+        return everything
+    rim_piece = np.array([root(int(g)) if int(g) in side_of else int(g) for g in rim_piece])
+    ring_piece = np.array([root(int(g)) if int(g) in side_of else int(g) for g in ring_piece],
+                          dtype=np.int64)
+    big = sorted({root(g) for g in big})
+    keep = np.isin(rim_piece, big)
+    _, nearest = cKDTree(ctx.xy[rim[keep]]).query(new_xy)
+    side = rim_piece[keep][nearest]
+    # ring points of the small pieces go with the side of their nearest big rim vertex
+    _, ring_near = cKDTree(ctx.xy[rim[keep]]).query(ctx.xy[ring])
+    ring_side = np.where(np.isin(ring_piece, big), ring_piece, rim_piece[keep][ring_near])
+    return [(ring[ring_side == g], np.flatnonzero(side == g)) for g in big]
 
 
 def ring_reach(size: float, spacing: float) -> float:

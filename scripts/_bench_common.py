@@ -23,9 +23,18 @@ BUNNIES = ("bun000", "bun045", "bun090", "bun180")
 
 
 def scans(names: Iterable[str] | None = None) -> dict[str, am.Scan]:
-    """The face map and, when present, the Stanford bunny scans."""
+    """The face map and, when present, the Stanford bunny scans.
+
+    A name with a suffix (``views/syn270.ply``) is a scan file, read as it is and keyed by
+    that name (:func:`label` gives its stem).
+    """
     out: dict[str, am.Scan] = {}
     for name in names or ("face", *BUNNIES):
+        if Path(name).suffix:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                out[name] = am.load_scan(name)
+            continue
         if name == "face":
             out[name] = am.load_scan(am.face_map_path())
             continue
@@ -37,6 +46,11 @@ def scans(names: Iterable[str] | None = None) -> dict[str, am.Scan]:
         else:
             print(f"(skipping {name}: {path} not found)")
     return out
+
+
+def label(name: str) -> str:
+    """A scan's name in tables: a file's stem, else the name."""
+    return Path(name).stem if Path(name).suffix else name
 
 
 def timed(fn: Callable, *args, **kw):

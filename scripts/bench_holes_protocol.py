@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _bench_common import machine, scans, table, write_section  # noqa: E402
+from _bench_common import label, machine, scans, table, write_section  # noqa: E402
 
 
 def _case(args: tuple[str, int, bool, str, bool]) -> dict:
@@ -72,19 +72,30 @@ def _case(args: tuple[str, int, bool, str, bool]) -> dict:
 
 
 def _open_holes(p, res) -> list[str | None]:
-    """For each enclosed truth hole, the reason of a fill's hole left open on it (or None)."""
+    """For each enclosed truth hole left open, why (else None).
+
+    Open: most of its truth points have no output vertex within 1.5 median spacings in
+    the view plane (a fill puts vertices at the scan's spacing). The reason is the one
+    the fill reported for the nearest hole it left open, or "not found as a hole".
+    """
+    from scipy.spatial import cKDTree
+
+    from asrbf_mesh._frame import sampling_spacing
+
+    out_xy = res.mesh.vertices[:, :2]
+    gap = 1.5 * sampling_spacing(p.scan.points[:, :2])
+    far = cKDTree(out_xy).query(p.truth[:, :2], distance_upper_bound=gap)[0] > gap
+    skipped = [info for info in res.holes if not info.filled]
     out: list[str | None] = []
     for h in np.flatnonzero(p.enclosed):
-        pts = p.truth[p.hole == h][:, :2]
-        lo, hi = pts.min(0), pts.max(0)
-        pad = 0.25 * float((hi - lo).max())
-        why = None
-        for info in res.holes:
-            c = np.asarray(info.centre[:2])
-            if not info.filled and np.all(c >= lo - pad) and np.all(c <= hi + pad):
-                why = info.reason or "not filled"
-                break
-        out.append(why)
+        mine = p.hole == h
+        if np.mean(far[mine]) <= 0.5:
+            out.append(None)
+            continue
+        c = p.truth[mine][:, :2].mean(axis=0)
+        near = min(skipped, key=lambda i: float(np.linalg.norm(np.asarray(i.centre[:2]) - c)),
+                   default=None)
+        out.append((near.reason or "not filled") if near else "not found as a hole")
     return out
 
 
@@ -140,6 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pieces", default="auto", choices=("auto", "1"))
     ap.add_argument("--peers", action="store_true")
     ap.add_argument("--workers", type=int, default=max(1, min(2, os.cpu_count() or 1)))
+    ap.add_argument("--scans", nargs="+", metavar="PATH",
+                    help="scan files instead of the face map and the bunnies (e.g. the "
+                         "views of scripts/synth_views.py); written to their own section")
     args = ap.parse_args(argv)
     if args.peers:  # a peer that cannot run would score as the punched scan itself
         try:
@@ -147,27 +161,30 @@ def main(argv: list[str] | None = None) -> int:
             import pyvista  # noqa: F401
         except ImportError as exc:
             ap.exit(2, f"--peers needs the bench extra (pip install -e '.[bench]'): {exc}\n")
-    names = list(scans())
+    names = list(scans(args.scans))
     t0 = time.perf_counter()
     done, bad = run(names, args.seeds, args.poisson, args.pieces, args.workers, args.peers)
     took = time.perf_counter() - t0
     crashes = [b for b in bad if b[2].startswith("CRASH")]
     holes = sum(len(r["rms"]) for r in done)
     opened = [(r["name"], r["seed"], why) for r in done for why in r["open"] if why]
+    views = " --scans " + " ".join(args.scans) if args.scans else ""
     flags = " --poisson" * args.poisson + " --peers" * args.peers + " --fuzz" * args.fuzz + (
         f" --pieces {args.pieces}" if args.pieces != "auto" else "")
     head = (f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; `python "
-            f"scripts/bench_holes_protocol.py --seeds {_seeds(args.seeds)}{flags}` "
+            f"scripts/bench_holes_protocol.py --seeds {_seeds(args.seeds)}{flags}{views}` "
             f"({took:.0f} s)._\n\n")
     lines = [f"- cases: {len(done) + len(bad):,} ({len(names)} scans × {len(args.seeds)} seeds); "
              f"crashes: {len(crashes)}; cases that raised: {len(bad) - len(crashes)}",
              f"- enclosed holes: {holes:,}; left open: {len(opened)}"]
     for name, seed, why in (bad + opened)[:20]:
-        lines.append(f"  - {name} seed {seed}: {why}")
+        lines.append(f"  - {label(name)} seed {seed}: {why}")
+    suffix = "-views" if args.scans else ""
     if args.fuzz:
-        body = "## Hole filling: crash campaign (issue 15)\n\n" + head + "\n".join(lines) + "\n"
+        body = (f"## Hole filling: crash campaign (issue 15){' on other scans' * bool(suffix)}"
+                "\n\n" + head + "\n".join(lines) + "\n")
         print(body)
-        write_section("holes-fuzz", body)
+        write_section("holes-fuzz" + suffix, body)
         return 1 if crashes else 0
     methods = ["ours"] + ["poisson"] * args.poisson + (list(_peer_names()) if args.peers else [])
     headers = ["method", "enclosed holes", "left open", "pooled RMS %", "median %", "90th %",
@@ -181,9 +198,10 @@ def main(argv: list[str] | None = None) -> int:
             rs = [r for r in done if name in ("pooled", r["name"])]
             if rs:
                 rows = [_row(m, rs, traced) for m in methods]
-                parts.append(f"**{name}**\n\n" + table(headers, rows))
-    tag = f"holes-protocol-{args.pieces}"
-    body = ("## Hole filling on the punch protocol (issue 15): seeds "
+                parts.append(f"**{label(name)}**\n\n" + table(headers, rows))
+    tag = f"holes-protocol-{args.pieces}{suffix}"
+    body = (f"## Hole filling on the punch protocol (issue 15){' on other scans' * bool(suffix)}"
+            ": seeds "
             f"{_seeds(args.seeds)}, --pieces {args.pieces}\n\n" + head
             + "\n".join(lines) + "\n\nPer hole: RMS of its truth points' distances to the "
             "output, % of the bounding-box diagonal; pooled: over all enclosed truth points; "

@@ -26,10 +26,24 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _bench_common import machine, median_worst, scans, table, timed, write_section  # noqa: E402
+from _bench_common import (  # noqa: E402
+    label,
+    machine,
+    median_worst,
+    scans,
+    table,
+    timed,
+    write_section,
+)
 
 import asrbf_mesh as am  # noqa: E402
 from asrbf_mesh._igl import point_mesh_distance  # noqa: E402
+
+#: Set by ``--scans``: scan files to read instead of the face map and the bunnies, the
+#: suffix of the sections they are written to, and the option as the command shows it.
+_PATHS: list[str] | None = None
+_SUFFIX = ""
+_CMD = ""
 
 HEADERS = ["scan", "N", "model", "pieces", "K", "N:K", "E̅", "fit s",
            "scan→mesh 99.9 % / max", "same, samples in triangles", "mesh→scan 99.9 % / max",
@@ -43,12 +57,19 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the LOD part: 4 resample levels per scan, model and seed")
     ap.add_argument("--ratio", type=int, metavar="REPS", default=0,
                     help="only the fit-time ratio: REPS interleaved fits per model and seed")
+    ap.add_argument("--scans", nargs="+", metavar="PATH",
+                    help="scan files instead of the face map and the bunnies (e.g. the "
+                         "views of scripts/synth_views.py); written to their own sections")
     args = ap.parse_args(argv)
+    global _PATHS, _SUFFIX, _CMD
+    _PATHS = args.scans
+    _SUFFIX = "-views" if args.scans else ""
+    _CMD = " --scans " + " ".join(args.scans) if args.scans else ""
     if args.lod:
         return lod_main(args.seeds)
     if args.ratio:
         return ratio_main(args.seeds, args.ratio)
-    found = scans()
+    found = scans(_PATHS)
     warm = next(iter(found.values()))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -60,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = ", ".join(map(str, args.seeds))
     body = ("## Piecewise model vs the single network (issue 14)\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
-            f"`python scripts/bench_pieces.py --seeds {' '.join(map(str, args.seeds))}` "
+            f"`python scripts/bench_pieces.py --seeds {' '.join(map(str, args.seeds))}{_CMD}` "
             f"({time.perf_counter() - t0:.0f} s)._ Seeds {seeds}.\n\n"
             "Single: `am.fit(scan, pieces=1)` (`--pieces 1`, the paper's model). Pieces: "
             "`am.fit(scan)` (`--pieces auto`, the default): the scan cut by `am.segment` "
@@ -80,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
             "Each cell: median over the seeds (worst seed).\n\n"
             + table(HEADERS, rows))
     print(body)
-    write_section("pieces", body)
+    write_section("pieces" + _SUFFIX, body)
     return 0
 
 
@@ -100,11 +121,11 @@ def lod_main(seeds: list[int]) -> int:
 
     t0 = time.perf_counter()
     rows = []
-    for name, scan in scans().items():
+    for name, scan in scans(_PATHS).items():
         diag = scan.bbox_diagonal
         ref = am.Mesh(scan.points, scan.faces)
         used = np.unique(scan.faces)
-        for label, pieces in (("single", 1), ("pieces", "auto")):
+        for model, pieces in (("single", 1), ("pieces", "auto")):
             rms, mono, p_sm, p_ms, ratio, surf = [], [], [], [], [], []
             for seed in seeds:
                 with warnings.catch_warnings(), tempfile.TemporaryDirectory() as tmp:
@@ -124,16 +145,16 @@ def lod_main(seeds: list[int]) -> int:
                                 for lv in filled) * 100 / diag)
                 q = free_qem(ref, network_file_bytes(net))
                 ratio.append(r[0] / q["rms_pct"])
-                print(f"{name} {label} seed {seed}: RMS {r}, 99.9 {p_sm[-1]:.2f} / "
+                print(f"{label(name)} {model} seed {seed}: RMS {r}, 99.9 {p_sm[-1]:.2f} / "
                       f"{p_ms[-1]:.2f} %, level 0 / QEM {ratio[-1]:.2f}", flush=True)
             med = np.median(np.array(rms), axis=0)
-            rows.append([name, label, " / ".join(f"{v:.3f}" for v in med),
+            rows.append([label(name), model, " / ".join(f"{v:.3f}" for v in med),
                          f"{sum(mono)} of {len(mono)} seeds", median_worst(p_sm, ".2f"),
                          median_worst(p_ms, ".2f"), median_worst(surf, ".2f"),
                          median_worst(ratio, ".2f")])
     body = (f"## LOD sets of the piecewise model (issue 14): seeds {', '.join(map(str, seeds))}"
             f"\n\n_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
-            f"`python scripts/bench_pieces.py --lod` ({time.perf_counter() - t0:.0f} s)._\n\n"
+            f"`python scripts/bench_pieces.py --lod{_CMD}` ({time.perf_counter() - t0:.0f} s)._\n\n"
             "`am.lod_set(scan, levels=4, net=am.fit(scan, pieces=...))` (what `asrbf lod` "
             "does; resample: one model sampled on grids twice as coarse per level, each piece "
             "on its own cells, walls between them). RMS: Metro RMS against the scan mesh "
@@ -148,7 +169,7 @@ def lod_main(seeds: list[int]) -> int:
             "ratio is level 0's Metro RMS over the QEM mesh's. Cells: median (worst seed).\n\n"
             + table(LOD_HEADERS, rows))
     print(body)
-    write_section("pieces-lod", body)
+    write_section("pieces-lod" + _SUFFIX, body)
     return 0
 
 
@@ -163,7 +184,7 @@ def ratio_main(seeds: list[int], reps: int) -> int:
     """
     import asrbf_mesh._pieces as pieces_mod
 
-    found = scans()
+    found = scans(_PATHS)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for scan in found.values():  # compile the kernels and warm the caches first
@@ -190,8 +211,8 @@ def ratio_main(seeds: list[int], reps: int) -> int:
         finally:
             pieces_mod.TAIL_ROUNDS = rounds
         ratio = [best["auto"][s] / best["1"][s] for s in seeds]
-        print(f"{name}: " + ", ".join(f"{r:.2f}" for r in ratio), flush=True)
-        rows.append([name, median_worst([best["1"][s] for s in seeds], ".3f"),
+        print(f"{label(name)}: " + ", ".join(f"{r:.2f}" for r in ratio), flush=True)
+        rows.append([label(name), median_worst([best["1"][s] for s in seeds], ".3f"),
                      median_worst([best["auto"][s] for s in seeds], ".3f"),
                      median_worst(ratio, ".2f"), ", ".join(f"{r:.2f}" for r in ratio),
                      median_worst([best["cut"][s] for s in seeds], ".3f"),
@@ -199,7 +220,8 @@ def ratio_main(seeds: list[int], reps: int) -> int:
     seeds_s = ", ".join(map(str, seeds))
     body = ("## Piecewise fit time against the single fit (issue 14)\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
-            f"`python scripts/bench_pieces.py --ratio {reps} --seeds {' '.join(map(str, seeds))}`"
+            f"`python scripts/bench_pieces.py --ratio {reps} --seeds {' '.join(map(str, seeds))}"
+            f"{_CMD}`"
             f" ({time.perf_counter() - t0:.0f} s)._\n\n"
             f"`am.fit(scan)` (pieces) and `am.fit(scan, pieces=1)` (single) alternate {reps} "
             "times per seed with two variants of pieces; each keeps its fastest run "
@@ -212,7 +234,7 @@ def ratio_main(seeds: list[int], reps: int) -> int:
             + table(["scan", "single s", "pieces s", "pieces / single", "per seed",
                      "pieces, cut given s", "pieces, no tails s"], rows))
     print(body)
-    write_section("pieces-time", body)
+    write_section("pieces-time" + _SUFFIX, body)
     return 0
 
 
@@ -221,7 +243,7 @@ def _rows(name: str, scan: am.Scan, seeds: list[int]) -> list[list]:
     ref = am.Mesh(scan.points, scan.faces)
     used = np.unique(scan.faces)
     out = []
-    for label, pieces in (("single", 1), ("pieces", "auto")):
+    for model, pieces in (("single", 1), ("pieces", "auto")):
         rec = []
         for seed in seeds:
             with warnings.catch_warnings():
@@ -238,10 +260,10 @@ def _rows(name: str, scan: am.Scan, seeds: list[int]) -> list[list]:
                         np.percentile(to_scan, 99.9), to_scan.max(),
                         np.percentile(to_mesh[used], 99.9),
                         np.percentile(filled_to_scan, 99.9)))
-            print(f"{name} {label} seed {seed}: K {net.n_neurons} E {net.info['ebar']:.5f} "
+            print(f"{label(name)} {model} seed {seed}: K {net.n_neurons} E {net.info['ebar']:.5f} "
                   f"{sec:.1f} s, 99.9 % {rec[-1][5]:.2f} / {rec[-1][7]:.2f} %", flush=True)
         c = list(zip(*rec, strict=True))
-        out.append([name, f"{scan.n_points:,}", label, str(int(statistics.median(c[0]))),
+        out.append([label(name), f"{scan.n_points:,}", model, str(int(statistics.median(c[0]))),
                     median_worst(c[1], ","), median_worst(c[2], ".0f", min),
                     median_worst(c[3], ".5f"),
                     median_worst(c[4], ".2f"),

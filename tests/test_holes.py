@@ -557,7 +557,7 @@ def test_a_patch_turns_to_the_scans_orientation_and_drops_clashing_triangles() -
 
 def test_a_hole_whose_dropped_triangles_left_no_gap_counts_as_filled() -> None:
     from asrbf_mesh._hole_loops import outer_loops
-    from asrbf_mesh._holes import HoleInfo, _closed_after_all, _edge_keys
+    from asrbf_mesh._holes import HoleInfo, _closed_after_all, _edge_keys, _still_open
 
     # a 4 x 4 grid of cells, each cut into two triangles; cell (1, 1) punched out
     ij = np.arange(25).reshape(5, 5)
@@ -572,7 +572,7 @@ def test_a_hole_whose_dropped_triangles_left_no_gap_counts_as_filled() -> None:
 
     def run(faces: np.ndarray, keys: np.ndarray) -> bool:
         infos = [HoleInfo(0, 1.0, 1.0, (0.0, 0.0, 0.0), 4, False, "2 triangles would ...")]
-        _closed_after_all({0: keys}, infos, faces, outer_loops(faces, 25))
+        _closed_after_all({0: keys}, infos, _still_open(faces, outer_loops(faces, 25)))
         return infos[0].filled
 
     assert run(full, cell)  # every edge shared by two faces: closed
@@ -810,3 +810,62 @@ def test_a_loop_through_a_pinch_vertex_is_closed_cycle_by_cycle() -> None:
     assert [len(c) for c in boundary_cycles(closed)] == [16]  # the outer border only
     he = np.concatenate([closed[:, [0, 1]], closed[:, [1, 2]], closed[:, [2, 0]]])
     assert len(np.unique(he, axis=0)) == len(he)
+
+
+def _grid_scan(z, keep=None):
+    """A range grid (spacing 1) as a scan; ``keep(x, y)`` masks points; no triangle across
+    a depth jump of more than 2."""
+    ny, nx = z.shape
+    y, x = np.mgrid[0:ny, 0:nx].astype(float)
+    ok = np.ones(z.shape, bool) if keep is None else keep(x, y)
+    idx = np.full(z.shape, -1)
+    idx[ok] = np.arange(ok.sum())
+    pts = np.c_[x[ok], y[ok], z[ok]]
+    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+    tris = np.vstack([np.stack([a, b, d], -1).reshape(-1, 3),
+                      np.stack([a, d, c], -1).reshape(-1, 3)])
+    tris = tris[(tris >= 0).all(1)]
+    tris = tris[np.ptp(pts[tris, 2], axis=1) <= 2]
+    return am.Scan(pts, tris)
+
+
+def test_a_hole_larger_than_the_limit_is_split_into_its_bays() -> None:
+    from asrbf_mesh._hole_find import find_holes
+
+    # two disks (radius 10) joined by a channel 2 wide: one hole 56 across
+    def keep(x, y):
+        d1, d2 = np.hypot(x - 20, y - 30), np.hypot(x - 60, y - 30)
+        channel = (np.abs(y - 30) < 1.2) & (x > 20) & (x < 60)
+        return ~((d1 < 10) | (d2 < 10) | channel)
+
+    scan = _grid_scan(np.zeros((60, 82)), keep)
+    xy = scan.points[:, :2]
+    whole, _, _ = find_holes(xy, scan.faces, 1.0, bay_mouth=8.0)
+    assert len(whole) == 1 and whole[0].size > 56
+    split, _, fp = find_holes(xy, scan.faces, 1.0, bay_mouth=8.0, max_size=40.0)
+    small = [h for h in split if h.size <= 40.0]
+    assert len(small) == 2 and all(20 <= h.size <= 32 for h in small)
+    rest = [h for h in split if h.size > 40.0]
+    assert [h.size for h in rest] == [whole[0].size]  # the channel keeps the whole's size
+    res = fill_holes(scan, max_hole_size=40.0, seed=0, progress=False)
+    done = [i for i in res.holes if i.filled]
+    assert len(done) == 2 and all(i.vertices_added > 150 for i in done)
+    left = [i for i in res.holes if not i.filled]
+    assert len(left) == 1 and left[0].reason.startswith("larger than max_hole_size")
+    # no fill over the channel: it stays a gap between the two patches
+    new = res.mesh.vertices[scan.n_points:]
+    assert not np.any((np.abs(new[:, 1] - 30) < 0.9) & (new[:, 0] > 33) & (new[:, 0] < 47))
+
+
+def test_a_hole_across_a_cliff_is_filled_on_each_side() -> None:
+    # a step of 8 between two flat terraces (x < 30: z = 0, else 8); no triangle across
+    # it; a disk of radius 11 punched on the cliff (a bay of the gap along the cliff)
+    z = np.where(np.mgrid[0:60, 0:60][1] < 30, 0.0, 8.0)
+    scan = _grid_scan(z, lambda x, y: np.hypot(x - 29.5, y - 30) >= 11)
+    res = fill_holes(scan, seed=0, progress=False)
+    assert res.network.n_pieces >= 2
+    new = res.mesh.vertices[scan.n_points:]
+    left, right = new[new[:, 0] < 27], new[new[:, 0] > 32]
+    assert len(left) > 20 and len(right) > 20
+    assert np.abs(left[:, 2]).max() < 0.05  # each side continues its own terrace
+    assert np.abs(right[:, 2] - 8).max() < 0.05
