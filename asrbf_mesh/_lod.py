@@ -65,6 +65,11 @@ REFIT_GRID_PER_D_MIN = 4.0
 
 #: Fewest grid samples along the shorter side of the coarsest level's grid.
 MIN_LEVEL_SAMPLES = 4
+#: A level leaves out the walls between pieces taller than this many of its grid
+#: spacings where the scan has no triangle across the jump (no scan edge from one piece
+#: to the other nearby): the scan is open there, and a wall is surface it does not have,
+#: which Metro samples (:func:`~asrbf_mesh._surface.reconstruct`, ``max_wall``).
+LOD_MAX_WALL = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -387,7 +392,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         out = []
         for i in range(levels):
             t = time.perf_counter()
-            mesh = reconstruct(net, spacing_abs=s0 * 2**i, **fp_kw)
+            mesh = reconstruct(net, spacing_abs=s0 * 2**i, max_wall=LOD_MAX_WALL, **fp_kw)
             d_min = net.info.get("d_min")
             out.append(LodLevel(i, "resample", mesh, nbytes,
                                 None if d_min is None else float(d_min), net.n_neurons,
@@ -426,7 +431,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         ni = fit(sc, base_cfg.replace(d_min=d), seed=seed, view_axis=view_axis,
                  pieces=pieces, progress=False)
         ni, nbytes = shipped(ni)
-        mesh = reconstruct(ni, spacing_abs=s, **fp_kw)
+        mesh = reconstruct(ni, spacing_abs=s, max_wall=LOD_MAX_WALL, **fp_kw)
         seconds = time.perf_counter() - t
         out.append(LodLevel(i, "refit", mesh, nbytes, d, ni.n_neurons, seconds, s, ni))
     return out

@@ -8,6 +8,8 @@ footprint: the grid cells that hold data.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from . import _config
@@ -46,7 +48,8 @@ def grid_faces(nx: int, ny: int, keep: np.ndarray | None = None) -> np.ndarray:
 
 def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: float | None = None,
                 footprint: Scan | np.ndarray | None = None, mode: str | None = None,
-                margin_rel: float = 0.0, coverage: str = "centre") -> Mesh:
+                margin_rel: float = 0.0, coverage: str = "centre",
+                max_wall: float | None = None) -> Mesh:
     """Mesh the network surface on a regular grid, in physical units.
 
     Parameters
@@ -81,6 +84,11 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         footprint (``centre``), or every cell that touches it (``any``: no fragment or
         strip narrower than a cell is lost, at the price of up to one cell beyond the
         border; coarse grids such as LOD levels want it).
+    max_wall : float, optional
+        With a footprint that has triangles: leave out the walls between pieces taller
+        than this many grid spacings where no scan edge joins the same two pieces within
+        1.5 spacings (an occlusion gap: the mesh stays open across it, as the scan is).
+        None: every wall.
 
     Returns
     -------
@@ -164,7 +172,14 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         snap = (on, fp, coverage == "any")
         if net.n_pieces > 1:  # each cell's piece, for the grid mesh and its fragments
             owner = net.piece_at(centres).reshape(keep.shape)
-    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap, owner=owner)
+    open_at, wall_max = None, None
+    if max_wall is not None and mode != "full" and faces is not None and len(faces) \
+            and net.n_pieces > 1:
+        step = float(gx[1] - gx[0])
+        wall_max = check_float(max_wall, "max_wall", low=0.0) * step
+        open_at = _gaps(net, local_xy, faces, 1.5 * step)
+    mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap, owner=owner,
+                                 wall_max=wall_max, open_at=open_at)
     if owner is not None:
         mesh = _with_fragments(net, mesh, on, gx, gy, np.where(keep, owner, -1))
     return mesh
@@ -270,8 +285,8 @@ def _delaunay(xy: np.ndarray, longest: float) -> np.ndarray:
 def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.ndarray | None,
                     *, walls: bool = True,
                     snap: tuple[np.ndarray, Footprint, bool] | None = None,
-                    owner: np.ndarray | None = None
-                    ) -> tuple[Mesh, np.ndarray, np.ndarray]:
+                    owner: np.ndarray | None = None, wall_max: float | None = None,
+                    open_at: Any = None) -> tuple[Mesh, np.ndarray, np.ndarray]:
     """Mesh each piece of ``net`` on the grid cells it owns, stitched by walls.
 
     ``xy`` holds the ``nx`` x ``ny`` grid nodes (row-major, local physical units) and
@@ -281,7 +296,9 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     of two pieces gets one vertex per piece, each on its own piece's surface. With
     ``walls``, the grid edge between two cells of different pieces becomes a wall of two
     triangles between the two pieces' vertices of its end nodes: no ramp across a depth
-    jump, and no crack either. A one-piece network gives the plain grid mesh.
+    jump, and no crack either; with ``wall_max`` (depth, local units), walls taller than
+    that are left out where ``open_at`` (view-plane points and the wall's two pieces ->
+    bool; None: everywhere) says the scan is open. A one-piece network gives the plain grid mesh.
 
     ``snap`` (the scan's view-plane points, its footprint and whether to snap border
     nodes): a vertex whose node lies in another piece's territory (a cell of one piece
@@ -315,8 +332,10 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
         owner = net.piece_at(centres.reshape(-1, 2)).reshape(keep.shape)
     parts = [grid_faces(nx, ny, keep & (owner == p)) + int(p) * n_nodes  # key: piece, node
              for p in np.unique(owner[keep])]
+    n_wall = 0
     if walls and net.n_pieces > 1:
         parts.append(_wall_keys(nx, ny, keep, owner, n_nodes))
+        n_wall = len(parts[-1])
     keys = np.concatenate(parts) if parts else np.zeros((0, 3), np.int64)
     if keys.size == 0:
         raise ScanError("the footprint selects no grid cell (is the footprint the right scan?)")
@@ -326,9 +345,51 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     if snap is not None:
         pts = _snap(net, pts, piece, *snap)
     which = None if net.n_pieces == 1 else piece
-    mesh = Mesh(net.surface_points(pts, piece=which), inverse.reshape(-1, 3),
-                vertex_normals=net.normals(pts, piece=which))
+    verts = net.surface_points(pts, piece=which)
+    faces = inverse.reshape(-1, 3)
+    if wall_max is not None and n_wall:
+        depth = (verts @ net.frame.rotation)[:, 2]
+        wall = faces[len(faces) - n_wall:]
+        tall = np.ptp(depth[wall], axis=1) > wall_max
+        if open_at is not None and tall.any():
+            w = wall[tall]
+            tall[tall] = open_at(pts[w].mean(axis=1), piece[w].min(axis=1),
+                                 piece[w].max(axis=1))
+        faces = np.delete(faces, len(faces) - n_wall + np.flatnonzero(tall), axis=0)
+    mesh = Mesh(verts, faces, vertex_normals=net.normals(pts, piece=which))
     return mesh, pts, piece
+
+
+def _gaps(net: Network, xy: np.ndarray, faces: np.ndarray, reach: float) -> Any:
+    """Return a test of walls: no scan edge joins their two pieces within ``reach``.
+
+    The test takes view-plane points and the two pieces of each wall (ids, either
+    order). Where the scan's own triangles run from one piece to the other (steep
+    triangles down a cliff), a wall between the pieces stands for them; where none does,
+    the scan is open across the jump.
+    """
+    from scipy.spatial import cKDTree
+
+    piece = net.piece_at(xy)
+    e = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
+                                          faces[:, [2, 0]]]), axis=1), axis=0)
+    pa, pb = piece[e[:, 0]], piece[e[:, 1]]
+    cross = pa != pb
+    key = np.minimum(pa, pb)[cross] * net.n_pieces + np.maximum(pa, pb)[cross]
+    mid = 0.5 * (xy[e[cross, 0]] + xy[e[cross, 1]])
+    trees = {int(k): cKDTree(mid[key == k]) for k in np.unique(key)}
+
+    def is_open(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        out = np.ones(len(q), dtype=bool)
+        pair = np.minimum(a, b) * net.n_pieces + np.maximum(a, b)
+        for k in np.unique(pair):
+            tree = trees.get(int(k))
+            if tree is not None:
+                at = np.flatnonzero(pair == k)
+                out[at] = ~np.isfinite(tree.query(q[at], distance_upper_bound=reach)[0])
+        return out
+
+    return is_open
 
 
 def _snap(net: Network, pts: np.ndarray, piece: np.ndarray, scan_xy: np.ndarray,

@@ -398,3 +398,36 @@ def test_too_many_levels_are_refused_up_front(scan) -> None:
     assert round(short / coarsest) + 1 >= MIN_LEVEL_SAMPLES
     with pytest.raises(ConfigError, match="levels must be at most"):
         lod_set(scan, levels=10**9, method="refit")
+
+
+def _terraces(across: bool) -> am.Scan:
+    """Two flat terraces (z = 0 for x < 30, z = 8 beyond) on a 60 x 40 grid of spacing 1;
+    ``across``: the scan has its steep triangles down the step, else a gap there."""
+    y, x = np.mgrid[0:40, 0:60].astype(float)
+    z = np.where(x < 30, 0.0, 8.0)
+    idx = np.arange(x.size).reshape(x.shape)
+    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+    tris = np.vstack([np.stack([a, b, d], -1).reshape(-1, 3),
+                      np.stack([a, d, c], -1).reshape(-1, 3)])
+    pts = np.c_[x.ravel(), y.ravel(), z.ravel()]
+    if not across:
+        tris = tris[np.ptp(pts[tris, 2], axis=1) == 0]
+    return am.Scan(pts, tris)
+
+
+@pytest.mark.parametrize("across", [False, True])
+def test_a_level_is_open_across_an_occlusion_gap_and_walled_down_a_cliff(across) -> None:
+    scan = _terraces(across)
+    net = am.fit(scan, seed=0, progress=False)
+    assert net.n_pieces == 2
+    level = lod_set(scan, levels=2, net=net, seed=0)[1]  # cells wider than the gap
+    v, f = level.mesh.vertices, level.mesh.faces
+    walls = np.ptp(v[f, 2], axis=1) > 3.0 * level.spacing_abs
+    if across:  # the scan has surface down the step: the wall stands for it
+        assert walls.sum() >= 2 * 20
+    else:  # the scan is open there, and so is the level
+        assert not walls.any()
+        # the same level with every wall (reconstruct's default) is closed across the gap
+        full = am.reconstruct(net, footprint=scan, spacing_abs=level.spacing_abs,
+                              coverage="any")
+        assert (np.ptp(full.vertices[full.faces, 2], axis=1) > 3.0).sum() >= 2 * 20
