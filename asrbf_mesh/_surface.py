@@ -86,9 +86,9 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         border; coarse grids such as LOD levels want it).
     max_wall : float, optional
         With a footprint that has triangles: leave out the walls between pieces taller
-        than this many grid spacings where no scan edge joins the same two pieces within
-        1.5 spacings (an occlusion gap: the mesh stays open across it, as the scan is).
-        None: every wall.
+        than this many grid spacings where the scan has no surface (an occlusion gap, the
+        wall's middle far from the scan's triangles: the mesh stays open across it, as
+        the scan is). None: every wall.
 
     Returns
     -------
@@ -153,7 +153,8 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     keep = None
     if mode != "full":
         pts = check_points(footprint, "footprint", min_points=3)
-        local_xy = np.ascontiguousarray((pts @ frame.rotation)[:, :2])
+        local = pts @ frame.rotation
+        local_xy = np.ascontiguousarray(local[:, :2])
         faces = footprint.faces if isinstance(footprint, Scan) else None
         fp = Footprint.of_points(local_xy, faces, sampling_spacing(local_xy), mode=mode)
         mid_x = 0.5 * (gx[:-1] + gx[1:])
@@ -177,7 +178,7 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
             and net.n_pieces > 1:
         step = float(gx[1] - gx[0])
         wall_max = check_float(max_wall, "max_wall", low=0.0) * step
-        open_at = _gaps(net, local_xy, faces, 1.5 * step)
+        open_at = _gaps(local, faces, step)
     mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap, owner=owner,
                                  wall_max=wall_max, open_at=open_at)
     if owner is not None:
@@ -297,8 +298,9 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     ``walls``, the grid edge between two cells of different pieces becomes a wall of two
     triangles between the two pieces' vertices of its end nodes: no ramp across a depth
     jump, and no crack either; with ``wall_max`` (depth, local units), walls taller than
-    that are left out where ``open_at`` (view-plane points and the wall's two pieces ->
-    bool; None: everywhere) says the scan is open. A one-piece network gives the plain grid mesh.
+    that are left out where ``open_at`` (each wall triangle's middle, local xyz, and
+    height -> bool; None: everywhere) says the scan is open. A one-piece network gives the
+    plain grid mesh.
 
     ``snap`` (the scan's view-plane points, its footprint and whether to snap border
     nodes): a vertex whose node lies in another piece's territory (a cell of one piece
@@ -348,46 +350,44 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     verts = net.surface_points(pts, piece=which)
     faces = inverse.reshape(-1, 3)
     if wall_max is not None and n_wall:
-        depth = (verts @ net.frame.rotation)[:, 2]
+        local_v = verts @ net.frame.rotation
         wall = faces[len(faces) - n_wall:]
-        tall = np.ptp(depth[wall], axis=1) > wall_max
+        height = np.ptp(local_v[wall, 2], axis=1)
+        tall = height > wall_max
         if open_at is not None and tall.any():
-            w = wall[tall]
-            tall[tall] = open_at(pts[w].mean(axis=1), piece[w].min(axis=1),
-                                 piece[w].max(axis=1))
+            w = local_v[wall[tall]]  # each wall triangle's middle: half way up
+            middle = np.column_stack([w[:, :, :2].mean(axis=1),
+                                      0.5 * (w[:, :, 2].min(axis=1) + w[:, :, 2].max(axis=1))])
+            tall[tall] = open_at(middle, height[tall])
         faces = np.delete(faces, len(faces) - n_wall + np.flatnonzero(tall), axis=0)
     mesh = Mesh(verts, faces, vertex_normals=net.normals(pts, piece=which))
     return mesh, pts, piece
 
 
-def _gaps(net: Network, xy: np.ndarray, faces: np.ndarray, reach: float) -> Any:
-    """Return a test of walls: no scan edge joins their two pieces within ``reach``.
+#: A wall over an occlusion gap is open when its middle is farther from the scan than
+#: this share of its height (and 1.5 grid steps). Measured on LOD level 0 (Metro RMS, %
+#: of the diagonal) of a synthetic bunny view from 270 degrees: every wall 0.614, 0.35 ->
+#: 0.329, 0.2 -> 0.087; at 0.2 the face map's level 0 opened where its scan has steep
+#: triangles down a cliff (a border 4.7 grid steps from the scan's), at 0.35 it does not.
+OPEN_SHARE = 0.35
 
-    The test takes view-plane points and the two pieces of each wall (ids, either
-    order). Where the scan's own triangles run from one piece to the other (steep
-    triangles down a cliff), a wall between the pieces stands for them; where none does,
-    the scan is open across the jump.
+
+def _gaps(local: np.ndarray, faces: np.ndarray, step: float) -> Any:
+    """Return a test of walls: the scan has no surface where they stand.
+
+    The test takes each wall triangle's middle (local xyz) and height. Down a cliff the
+    scan meshes with steep triangles: a wall beside them stands for them (its centroid
+    within about a grid step of the scan). Across an occlusion gap the scan is open: the
+    nearest scan surface to the wall's middle is a piece's border, half its height away.
+    Open: farther than ``max(OPEN_SHARE height, 1.5 step)``.
     """
-    from scipy.spatial import cKDTree
+    from ._igl import point_mesh_distance
 
-    piece = net.piece_at(xy)
-    e = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
-                                          faces[:, [2, 0]]]), axis=1), axis=0)
-    pa, pb = piece[e[:, 0]], piece[e[:, 1]]
-    cross = pa != pb
-    key = np.minimum(pa, pb)[cross] * net.n_pieces + np.maximum(pa, pb)[cross]
-    mid = 0.5 * (xy[e[cross, 0]] + xy[e[cross, 1]])
-    trees = {int(k): cKDTree(mid[key == k]) for k in np.unique(key)}
+    scan = Mesh(local, faces)
 
-    def is_open(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        out = np.ones(len(q), dtype=bool)
-        pair = np.minimum(a, b) * net.n_pieces + np.maximum(a, b)
-        for k in np.unique(pair):
-            tree = trees.get(int(k))
-            if tree is not None:
-                at = np.flatnonzero(pair == k)
-                out[at] = ~np.isfinite(tree.query(q[at], distance_upper_bound=reach)[0])
-        return out
+    def is_open(centroid: np.ndarray, height: np.ndarray) -> np.ndarray:
+        d = point_mesh_distance(centroid, scan)
+        return d > np.maximum(OPEN_SHARE * height, 1.5 * step)
 
     return is_open
 
