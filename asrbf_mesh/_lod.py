@@ -66,8 +66,9 @@ REFIT_GRID_PER_D_MIN = 4.0
 #: Fewest grid samples along the shorter side of the coarsest level's grid.
 MIN_LEVEL_SAMPLES = 4
 #: A level leaves out the walls between pieces taller than this many of its grid
-#: spacings where the scan has no surface (the wall's middle far from its triangles: an
-#: occlusion gap): a wall there is surface the scan does not have, which Metro samples
+#: spacings where the scan is open (an occlusion gap: no scan edge joins the two pieces
+#: there and the wall's middle is far from the scan's triangles): a wall there is surface
+#: the scan does not have, which Metro samples
 #: (:func:`~asrbf_mesh._surface.reconstruct`, ``max_wall``).
 LOD_MAX_WALL = 3.0
 

@@ -86,9 +86,9 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         border; coarse grids such as LOD levels want it).
     max_wall : float, optional
         With a footprint that has triangles: leave out the walls between pieces taller
-        than this many grid spacings where the scan has no surface (an occlusion gap, the
-        wall's middle far from the scan's triangles: the mesh stays open across it, as
-        the scan is). None: every wall.
+        than this many grid spacings where the scan is open (an occlusion gap: no scan
+        edge joins the two pieces near the wall and its middle is far from the scan's
+        triangles; the mesh stays open across it, as the scan is). None: every wall.
 
     Returns
     -------
@@ -178,7 +178,7 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
             and net.n_pieces > 1:
         step = float(gx[1] - gx[0])
         wall_max = check_float(max_wall, "max_wall", low=0.0) * step
-        open_at = _gaps(local, faces, step)
+        open_at = _gaps(net, local, faces, step)
     mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap, owner=owner,
                                  wall_max=wall_max, open_at=open_at)
     if owner is not None:
@@ -298,9 +298,9 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     ``walls``, the grid edge between two cells of different pieces becomes a wall of two
     triangles between the two pieces' vertices of its end nodes: no ramp across a depth
     jump, and no crack either; with ``wall_max`` (depth, local units), walls taller than
-    that are left out where ``open_at`` (each wall triangle's middle, local xyz, and
-    height -> bool; None: everywhere) says the scan is open. A one-piece network gives the
-    plain grid mesh.
+    that are left out where ``open_at`` (each wall triangle's middle, local xyz, its
+    height and its two pieces -> bool; None: everywhere) says the scan is open. A
+    one-piece network gives the plain grid mesh.
 
     ``snap`` (the scan's view-plane points, its footprint and whether to snap border
     nodes): a vertex whose node lies in another piece's territory (a cell of one piece
@@ -358,36 +358,59 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
             w = local_v[wall[tall]]  # each wall triangle's middle: half way up
             middle = np.column_stack([w[:, :, :2].mean(axis=1),
                                       0.5 * (w[:, :, 2].min(axis=1) + w[:, :, 2].max(axis=1))])
-            tall[tall] = open_at(middle, height[tall])
+            tall[tall] = open_at(middle, height[tall], piece[wall[tall]].min(axis=1),
+                                 piece[wall[tall]].max(axis=1))
         faces = np.delete(faces, len(faces) - n_wall + np.flatnonzero(tall), axis=0)
     mesh = Mesh(verts, faces, vertex_normals=net.normals(pts, piece=which))
     return mesh, pts, piece
 
 
-#: A wall over an occlusion gap is open when its middle is farther from the scan than
-#: this share of its height (and 1.5 grid steps). Measured on LOD level 0 (Metro RMS, %
-#: of the diagonal) of a synthetic bunny view from 270 degrees: every wall 0.614, 0.35 ->
-#: 0.329, 0.2 -> 0.087; at 0.2 the face map's level 0 opened where its scan has steep
-#: triangles down a cliff (a border 4.7 grid steps from the scan's), at 0.35 it does not.
-OPEN_SHARE = 0.35
+#: A wall over an occlusion gap is open when no scan edge joins its two pieces within
+#: 1.5 grid steps of it and its middle is farther from the scan than this share of its
+#: height (and 1.5 grid steps). Measured on LOD level 0 (Metro RMS, % of the diagonal) of
+#: a synthetic bunny view from 270 degrees: every wall 0.614; the distance alone at 0.35
+#: 0.329, at 0.2 0.087, but at 0.2 the face map's level 0 opened where its scan has
+#: steep triangles down a cliff (a border 4.7 grid steps from the scan's); the edges
+#: alone 0.087, but they opened bun000's and bun045's levels where the piece map cut
+#: steep scan triangles (their RMS order fell on 8 and 4 of seeds 0-9).
+OPEN_SHARE = 0.2
 
 
-def _gaps(local: np.ndarray, faces: np.ndarray, step: float) -> Any:
+def _gaps(net: Network, local: np.ndarray, faces: np.ndarray, step: float) -> Any:
     """Return a test of walls: the scan has no surface where they stand.
 
-    The test takes each wall triangle's middle (local xyz) and height. Down a cliff the
-    scan meshes with steep triangles: a wall beside them stands for them (its centroid
-    within about a grid step of the scan). Across an occlusion gap the scan is open: the
-    nearest scan surface to the wall's middle is a piece's border, half its height away.
-    Open: farther than ``max(OPEN_SHARE height, 1.5 step)``.
+    The test takes each wall triangle's middle (local xyz), height and two pieces. Down
+    a cliff the scan meshes with steep triangles: they join the two pieces, and a wall
+    beside them stands for them (its middle within about a grid step of the scan).
+    Across an occlusion gap the scan is open: no scan edge joins the pieces there, and
+    the nearest scan surface to the wall's middle is a piece's border, half its height
+    away. Open: both (:data:`OPEN_SHARE`).
     """
+    from scipy.spatial import cKDTree
+
     from ._igl import point_mesh_distance
 
     scan = Mesh(local, faces)
+    piece = net.piece_at(local[:, :2])
+    e = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
+                                          faces[:, [2, 0]]]), axis=1), axis=0)
+    e = e[piece[e[:, 0]] != piece[e[:, 1]]]
+    pair = np.minimum(piece[e[:, 0]], piece[e[:, 1]]) * net.n_pieces + np.maximum(
+        piece[e[:, 0]], piece[e[:, 1]])
+    mid = 0.5 * (local[e[:, 0], :2] + local[e[:, 1], :2])
+    trees = {int(k): cKDTree(mid[pair == k]) for k in np.unique(pair)}
 
-    def is_open(centroid: np.ndarray, height: np.ndarray) -> np.ndarray:
-        d = point_mesh_distance(centroid, scan)
-        return d > np.maximum(OPEN_SHARE * height, 1.5 * step)
+    def is_open(middle: np.ndarray, height: np.ndarray, a: np.ndarray, b: np.ndarray
+                ) -> np.ndarray:
+        out = point_mesh_distance(middle, scan) > np.maximum(OPEN_SHARE * height, 1.5 * step)
+        key = np.minimum(a, b) * net.n_pieces + np.maximum(a, b)
+        for k in np.unique(key[out]):
+            tree = trees.get(int(k))
+            if tree is not None:
+                at = np.flatnonzero(out & (key == k))
+                near = tree.query(middle[at, :2], distance_upper_bound=1.5 * step)[0]
+                out[at] = ~np.isfinite(near)
+        return out
 
     return is_open
 
