@@ -79,7 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, scan in found.items():
         rows += _rows(name, scan, args.seeds)
     seeds = ", ".join(map(str, args.seeds))
-    body = ("## Piecewise model vs the single network (issue 14)\n\n"
+    body = ("## Piecewise model vs the single network (issue 14)"
+            f"{' on other scans' * bool(_SUFFIX)}\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --seeds {' '.join(map(str, args.seeds))}{_CMD}` "
             f"({time.perf_counter() - t0:.0f} s)._ Seeds {seeds}.\n\n"
@@ -152,7 +153,8 @@ def lod_main(seeds: list[int]) -> int:
                          f"{sum(mono)} of {len(mono)} seeds", median_worst(p_sm, ".2f"),
                          median_worst(p_ms, ".2f"), median_worst(surf, ".2f"),
                          median_worst(ratio, ".2f")])
-    body = (f"## LOD sets of the piecewise model (issue 14): seeds {', '.join(map(str, seeds))}"
+    body = (f"## LOD sets of the piecewise model (issue 14){' on other scans' * bool(_SUFFIX)}: "
+            f"seeds {', '.join(map(str, seeds))}"
             f"\n\n_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --lod{_CMD}` ({time.perf_counter() - t0:.0f} s)._\n\n"
             "`am.lod_set(scan, levels=4, net=am.fit(scan, pieces=...))` (what `asrbf lod` "
@@ -218,7 +220,8 @@ def ratio_main(seeds: list[int], reps: int) -> int:
                      median_worst([best["cut"][s] for s in seeds], ".3f"),
                      median_worst([best["no tails"][s] for s in seeds], ".3f")])
     seeds_s = ", ".join(map(str, seeds))
-    body = ("## Piecewise fit time against the single fit (issue 14)\n\n"
+    body = ("## Piecewise fit time against the single fit (issue 14)"
+            f"{' on other scans' * bool(_SUFFIX)}\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --ratio {reps} --seeds {' '.join(map(str, seeds))}"
             f"{_CMD}`"
