@@ -464,9 +464,9 @@ def _sides(ctx: Ctx, rim: np.ndarray, seg: np.ndarray, ring: np.ndarray,
             side_of[root(a)] = root(b)
     if len({root(g) for g in big}) < 2:
         return everything
-    rim_piece = np.array([root(int(g)) if int(g) in side_of else int(g) for g in rim_piece])
-    ring_piece = np.array([root(int(g)) if int(g) in side_of else int(g) for g in ring_piece],
-                          dtype=np.int64)
+    lut = np.arange(int(max(rim_piece.max(), ring_piece.max())) + 1)
+    lut[big] = [root(g) for g in big]
+    rim_piece, ring_piece = lut[rim_piece], lut[ring_piece]
     big = sorted({root(g) for g in big})
     keep = np.isin(rim_piece, big)
     _, nearest = cKDTree(ctx.xy[rim[keep]]).query(new_xy)
