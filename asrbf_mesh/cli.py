@@ -585,7 +585,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("reference", help="the reference: a mesh, or a point cloud (then only "
                                      "reference -> mesh is measured)")
     m.add_argument("--samples", type=int, default=None,
-                   help="area samples per direction [default: max(vertices, 10000)]")
+                   help="area samples per direction [default: max(4 x vertices, 10000)]")
     m.add_argument("--seed", type=int, default=0, help="seed of the area sampling [0]")
     m.add_argument("--error-mesh", help="write the mesh with its per-vertex distance to the "
                                         "reference as vertex quality (view it in MeshLab)")

@@ -373,7 +373,7 @@ FILTERS: dict[str, FilterSpec] = {spec.name: spec for spec in (
             Param("sampledmesh", "mesh", -1, "The mesh under test; -1: the current mesh.",
                   minimum=0, special=-1),
             Param("targetmesh", "mesh", 0, "The reference mesh (or point set).", minimum=0),
-            Param("samplenum", "int", 0, "Area samples per direction; 0: max(V0, V1, "
+            Param("samplenum", "int", 0, "Area samples per direction; 0: max(4 max(V0, V1), "
                   "10000) (V: referenced vertices).", minimum=1, special=0),
             Param("seed", "int", 0, "Seed of the area sampling (same seed, same figures).",
                   minimum=0),

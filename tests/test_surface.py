@@ -293,3 +293,43 @@ def test_a_row_of_samples_becomes_a_strip_one_cell_wide() -> None:
     assert 0.5 * cross.sum() == pytest.approx(2.0 * 0.5)  # the row's length times the width
     square, two = _ribbon(np.array([[1.0, 1.0]]), 0.5)
     assert two.shape == (2, 3) and np.ptp(square, axis=0).tolist() == [0.5, 0.5]
+
+
+# ----------------------------------------------------------------------------- the border
+
+
+@pytest.fixture(scope="module")
+def steep_bowl():
+    """A bowl z = 0.08 r^2 (mm) over a disk of radius 40 mm, 6.4 steep at its rim, scanned
+    on a 1 mm grid and triangulated, with its network."""
+    g = np.arange(-40.0, 40.0 + 1e-9, 1.0)
+    x, y = np.meshgrid(g, g)
+    inside = np.hypot(x, y) <= 40.0
+    u = np.column_stack([x[inside], y[inside]])
+    z = 0.08 * (u[:, 0] ** 2 + u[:, 1] ** 2)
+    from scipy.spatial import Delaunay
+
+    tri = Delaunay(u).simplices
+    e = np.linalg.norm(u[tri] - u[np.roll(tri, 1, axis=1)], axis=2).max(axis=1)
+    scan = am.Scan(np.column_stack([u, z]), tri[e < 1.5])
+    return scan, am.fit(scan, seed=0, passes=1, progress=False)
+
+
+def test_border_vertices_take_no_extrapolation(steep_bowl) -> None:
+    # a grid not aligned with the scan's puts nodes up to half a cell past its rim; the
+    # network's extrapolation there rises steeply (7.8 mm off the scan), the shelf at most
+    # 45 degrees over the rim's depth (1.9 mm)
+    scan, net = steep_bowl
+    from asrbf_mesh._igl import point_mesh_distance
+
+    mesh = reconstruct(net, spacing_abs=1.7, footprint=scan)
+    r = np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 1])
+    past = r > 40.0 + 1e-6
+    assert past.sum() > 20
+    d = point_mesh_distance(mesh.vertices[past], am.Mesh(scan.points, scan.faces))
+    assert d.max() <= 2.0  # mm: a grid cell (1.7) out at 45 degrees, and the fit's error
+    # the network itself would have put them farther off
+    grid = net.surface_points(mesh.vertices[past, :2] @ net.frame.rotation[:2, :2])
+    far = point_mesh_distance(grid, am.Mesh(scan.points, scan.faces))
+    assert far.max() > 3 * d.max()
+    assert np.all(signed_areas(mesh) > 0)  # and no triangle turned over

@@ -271,7 +271,7 @@ def write_lod_set(scan: Scan | np.ndarray, levels: list[LodLevel], out_dir: str 
                      axis=0)))},
         "network": shared,
         "metro": {"reference": ref_kind, "enabled": bool(metro),
-                  "samples": "all vertices + max(V_level, V_scan, 10000) area samples per "
+                  "samples": "all vertices + max(4 max(V_level, V_scan), 10000) area samples per "
                              "direction (seeded)" if ref_kind == "scan mesh" else
                              "all scan points, scan -> level only"},
         "definitions": {

@@ -31,8 +31,8 @@ from . import _meshlab
 __all__ = ["Direction", "MetroResult", "metro"]
 
 # What the sampling is, in words, for reports and --json.
-SAMPLING = ("vertices + uniform area samples (seeded Monte Carlo); mean and RMS over the "
-            "area samples, Hausdorff over all samples")
+SAMPLING = ("vertices + uniform area samples (seeded Monte Carlo, stratified); mean and RMS "
+            "over the area samples, Hausdorff over all samples")
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,7 +180,7 @@ def metro(a: Mesh | Scan, b: Mesh | Scan | np.ndarray, *, samples: int | None = 
     b : Mesh, Scan or (N, 3) array
         The reference; a bare point set (or a scan without faces) gives only ``b -> a``.
     samples : int, optional
-        Area samples per direction; default ``max(V_a, V_b, 10000)``.
+        Area samples per direction; default ``max(4 max(V_a, V_b), 10000)``.
     seed : int
         Seed of the area sampling: same seed, same figures.
     per_sample : bool
