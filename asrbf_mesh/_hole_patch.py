@@ -13,6 +13,12 @@ interpolation, ``blend="harmonic"``), so there is no step at the seam.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import os
+import sys
+import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -203,7 +209,8 @@ def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarra
     else:  # no constraint left: the points' own (convex hull) triangulation
         data, switches = {"vertices": pts}, flags.replace("p", "").replace("c", "")
     try:
-        res = triangle.triangulate(data, switches)
+        with _native_stdout_muted():
+            res = triangle.triangulate(data, switches)
     except (RuntimeError, ValueError, IndexError):  # "invalid geometry on input"
         return none
     tris = np.asarray(res.get("triangles", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
@@ -212,6 +219,44 @@ def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarra
         tris = np.where(tris < len(keep), keep[np.minimum(tris, len(keep) - 1)],
                         n + tris - len(keep))
     return tris, extra
+
+
+_STDOUT_LOCK = threading.Lock()
+
+
+def _flush_c_streams() -> None:
+    """Flush the C library's stdio buffers (where native code's printf waits)."""
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        ctypes.CDLL(None).fflush(None)
+
+
+@contextlib.contextmanager
+def _native_stdout_muted() -> Iterator[None]:
+    """Send what native code prints on file descriptor 1 to the null device meanwhile.
+
+    On an input it cannot take, triangle prints "Internal error in segmentintersection()"
+    (or the like) with C's printf before its wrapper raises; on stdout that text went
+    into ``asrbf fill-holes --json``'s output and made it invalid JSON (a synthetic bunny
+    view, punch seed 8). Python's own stdout is flushed first; one thread at a time.
+    """
+    with _STDOUT_LOCK:
+        try:
+            if sys.stdout is not None:
+                sys.stdout.flush()
+            saved = os.dup(1)
+        except (OSError, ValueError):  # no file descriptor 1: nothing to mute
+            yield
+            return
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            _flush_c_streams()
+            os.dup2(null, 1)
+            yield
+        finally:
+            _flush_c_streams()
+            os.dup2(saved, 1)
+            os.close(saved)
+            os.close(null)
 
 
 #: Points closer than this share of the points' extent are copies of one point.

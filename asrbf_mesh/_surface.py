@@ -364,7 +364,8 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
         # a vertex past the border moves onto the scan only with snap[2] (coverage "any")
         moves = ~outside | bool(snap[2])
         place, faces, is_wall, kept = _snapped(pts, faces, is_wall, piece,
-                                               np.where(moves[:, None], at, pts))
+                                               np.where(moves[:, None], at, pts),
+                                               keep_order=not snap[2])
         at, piece = at[kept], piece[kept]
         # off the scan and left in its place (past the border with coverage "centre", or
         # put back there because the move would turn a triangle over): a shelf
@@ -413,14 +414,19 @@ _SHELF_SLOPE = 1.0
 
 
 def _snapped(pts: np.ndarray, faces: np.ndarray, is_wall: np.ndarray, piece: np.ndarray,
-             moved: np.ndarray
+             moved: np.ndarray, *, keep_order: bool = True
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Apply the snap ``pts -> moved`` without folding the grid.
+    """Apply the snap ``pts -> moved``; vertices snapped onto one sample merge.
 
-    A grid triangle the snap would turn over (or flatten) in the view plane keeps its
-    vertices where they were; vertices of one piece snapped onto the same sample become
-    one, and the triangles that leaves without area are dropped. Returns the points,
-    faces and wall flags after that, and the indices (into ``pts``) of the points kept.
+    With ``keep_order``, a grid triangle the snap would turn over (or flatten) in the
+    view plane keeps its vertices where they were. Vertices of one piece snapped onto
+    the same sample become one, and the triangles that leaves without area are dropped.
+    Returns the points, faces and wall flags after that, and the indices (into ``pts``)
+    of the points kept.
+
+    Coarse grids (coverage "any", LOD levels) move their border nodes up to a whole cell
+    and keep every move: a node put back would stand a cell past the scan (the face
+    map's LOD sets, seeds 0-3: mesh -> scan 99.9th percentile 0.59-0.71 -> 1.60-1.66 %).
     """
     every = np.arange(len(pts))
     if np.array_equal(moved, pts):
@@ -430,7 +436,7 @@ def _snapped(pts: np.ndarray, faces: np.ndarray, is_wall: np.ndarray, piece: np.
     moved = moved.copy()
     grid = faces[~is_wall]
     before = signed_areas(pts, grid)
-    for _ in range(4):
+    for _ in range(4 if keep_order else 0):
         after = signed_areas(moved, grid)
         # turned over, or flat with three distinct corners (two that met merge below)
         p = moved[grid]

@@ -131,3 +131,30 @@ def test_triangulate_refuses_points_off_the_segments() -> None:
         triangulate(np.array([[0.0, 0], [1, np.nan], [0, 1]]), np.zeros((0, 2), int), "pQ")
     tris, extra = triangulate(np.vstack([p, p[:1]]), np.array([[0, 1], [1, 2], [2, 3]]), "pQ")
     assert len(tris) == 1 and set(tris[0].tolist()) == {0, 1, 2} and len(extra) == 0
+
+
+def test_triangles_own_messages_stay_off_stdout(capfd) -> None:
+    # a staircase rim closed by a diagonal through its corners (a loop of a synthetic
+    # bunny view, punch seed 8): triangle prints "Internal error in
+    # segmentintersection()" with C's printf before its wrapper raises; on stdout that
+    # broke `asrbf fill-holes --json`
+    import numpy as np
+
+    from asrbf_mesh._hole_patch import triangulate
+
+    x = [-0.0003222006709305558, -0.0008222901838575089, -0.001322379696784469,
+         -0.001822469209711429, -0.002322558722638389, -0.002822648235565342,
+         -0.003322737748492302, -0.003822827261419262]
+    y = [0.06580634202622537, 0.06630643153915233, 0.06680652105207929,
+         0.06730661056500625, 0.06780670007793321, 0.06830678959086017,
+         0.06880687910378713, 0.06930696861671409]
+    steps = [(0, 0), (1, 0), (2, 0), (2, 1), (2, 2), (3, 2), (3, 3), (3, 4), (4, 4), (4, 5),
+             (5, 5), (5, 6), (6, 6), (6, 7), (7, 7)]
+    pts = np.array([[x[i], y[j]] for i, j in steps])
+    seg = np.column_stack([np.arange(15), (np.arange(15) + 1) % 15])
+    print("before", flush=True)
+    tris, _ = triangulate(pts, seg, "pQ")
+    print("after", flush=True)
+    out = capfd.readouterr().out
+    assert out == "before\nafter\n"
+    assert len(tris) == 0  # triangle refused it: no triangle, as for any input it refuses
