@@ -333,3 +333,28 @@ def test_border_vertices_take_no_extrapolation(steep_bowl) -> None:
     far = point_mesh_distance(grid, am.Mesh(scan.points, scan.faces))
     assert far.max() > 3 * d.max()
     assert np.all(signed_areas(mesh) > 0)  # and no triangle turned over
+
+
+def test_a_tall_wall_opens_where_the_scan_is_far_in_grid_steps() -> None:
+    # two flat pieces at depth 0 with a gap between them and no scan edge across it; a
+    # wall 10 deep whose middle is 1.0 from the scan: within a fifth of its height, but
+    # past 6 grid steps (0.1 each), so the scan is open there; one 0.3 from it is not
+    from asrbf_mesh._surface import _gaps
+
+    class TwoPieces:
+        n_pieces = 2
+
+        @staticmethod
+        def piece_at(xy: np.ndarray) -> np.ndarray:
+            return (np.asarray(xy)[:, 0] > 0.5).astype(np.int64)
+
+    g = np.linspace(0.0, 1.0, 21)
+    x, y = np.meshgrid(g, g)
+    pts = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    faces = grid_faces(21, 21)
+    centre = pts[faces].mean(axis=1)
+    faces = faces[np.abs(centre[:, 0] - 0.5) > 0.06]  # the gap: no triangle across
+    is_open = _gaps(TwoPieces(), pts, faces, 0.1)
+    middle = np.array([[0.5, 0.5, 1.0], [0.5, 0.5, 0.3]])
+    out = is_open(middle, np.array([10.0, 10.0]), np.array([0, 0]), np.array([1, 1]))
+    assert out.tolist() == [True, False]
