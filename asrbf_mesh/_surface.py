@@ -406,7 +406,8 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
 #: samples in triangles -> mesh) of a synthetic bunny view from 270 degrees: the
 #: network's extrapolation 0.58-0.64 / 0.51-0.53, slope 1 0.48-0.53 / 0.51-0.54, slope 2
 #: 0.52-0.56 / 0.51-0.53, slope 4 0.57-0.62 / 0.51-0.53, slope 0 (the border's depth)
-#: 0.44-0.49 / 0.54-0.55. On bun045 slope 0 took scan -> mesh from 0.51-0.55 to
+#: 0.44-0.49 / 0.54-0.55 (the slopes other than 1 measured before a snap that would turn a
+#: triangle over fell back to a shelf). On bun045 slope 0 took scan -> mesh from 0.51-0.55 to
 #: 0.53-0.59 (slope 1: 0.51-0.55): the triangles from the last node inside to one at
 #: the border's depth miss the scan's border samples; moving the nodes onto the border
 #: in the view plane instead gave 0.53-0.60 (the mesh's border cut inside the scan's).
@@ -426,7 +427,8 @@ def _snapped(pts: np.ndarray, faces: np.ndarray, is_wall: np.ndarray, piece: np.
 
     Coarse grids (coverage "any", LOD levels) move their border nodes up to a whole cell
     and keep every move: a node put back would stand a cell past the scan (the face
-    map's LOD sets, seeds 0-3: mesh -> scan 99.9th percentile 0.59-0.71 -> 1.60-1.66 %).
+    map's LOD sets: mesh -> scan 99.9th percentile 1.60-1.66 % on seeds 2-3 with the
+    moves put back, 0.59-0.71 % on seeds 0-2 with every move kept).
     """
     every = np.arange(len(pts))
     if np.array_equal(moved, pts):
