@@ -11,11 +11,11 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from scipy import ndimage
-from scipy.spatial import Delaunay, QhullError
 
 from . import _holes_kernels as _hk
 from ._grid_knn import nearest_feature
 from ._outliers import isolated_points
+from ._triangle import delaunay
 from .errors import ScanError
 
 __all__ = ["Footprint", "point_cloud_faces", "signed_areas"]
@@ -35,15 +35,10 @@ def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) 
     shape in spirit), so gaps wider than a few samples stay open. Points that span no
     area (fewer than 3, or all on one line) give no triangles.
     """
-    try:
-        tri = Delaunay(xy).simplices.astype(np.int64)
-    except (QhullError, ValueError):
-        return np.zeros((0, 3), dtype=np.int64)
+    tri = delaunay(xy)
     p = xy[tri]
     edges = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
     tri = tri[edges <= max_edge * spacing]
-    area = signed_areas(xy, tri)
-    tri[area < 0] = tri[area < 0][:, [0, 2, 1]]
     return tri
 
 

@@ -13,12 +13,6 @@ interpolation, ``blend="harmonic"``), so there is no step at the seam.
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import os
-import sys
-import threading
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -34,6 +28,7 @@ from ._footprint import signed_areas
 from ._hole_find import Hole
 from ._network import Network
 from ._piece import Piece
+from ._triangle import triangulate
 
 __all__ = ["BLENDS", "EMPTY", "Ctx", "Patch", "away_from", "close_patch", "fill_single",
            "grid_samples", "ring_reach", "triangulate"]
@@ -167,130 +162,6 @@ def _segments_through(pts: np.ndarray, seg: np.ndarray, points: np.ndarray,
         dist = np.linalg.norm(a + t[:, None] * d - q, axis=1)
         hit |= dist < 1e-6 * spacing
     return hit
-
-
-def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarray, np.ndarray]:
-    """Constrained triangulation; returns (triangles, vertices triangle had to add).
-
-    The one door to the ``triangle`` library, which crashes the process or raises from its
-    wrapper on input it cannot take: points all on one line (SIGSEGV), an empty segment
-    list with the ``p`` switch (IndexError; a rim whose every edge crossed another), fewer
-    than three points; copies of a point (exact, or within 1e-9 of the extent) joined by
-    segments, or a segment given twice (an endless loop). Those get no triangle here,
-    copies of a point are passed once (triangles use the first copy), and zero-length and
-    repeated segments are dropped; segments must index the points. Input triangle still
-    refuses (it raises) gets no triangle either.
-    """
-    import triangle
-
-    pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
-    seg = np.ascontiguousarray(seg, dtype=np.int64).reshape(-1, 2)
-    none = np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2))
-    if not np.isfinite(pts).all():
-        raise ValueError("triangulate: points must be finite")
-    if len(seg) and (seg.min() < 0 or seg.max() >= len(pts)):
-        raise ValueError("triangulate: a segment indexes no point")
-    if len(pts) < 3 or not _spans_area(pts):
-        return none
-    n = len(pts)
-    first = _first_copies(pts)
-    if first is not None:  # segments between copies of a point make triangle loop forever
-        keep = np.unique(first)
-        slot = np.full(n, -1, dtype=np.int64)
-        slot[keep] = np.arange(len(keep))
-        pts, seg = pts[keep], slot[first[seg]]
-    seg = seg[seg[:, 0] != seg[:, 1]]
-    if len(seg):
-        key = np.sort(seg, axis=1)
-        _, once = np.unique(key[:, 0] * n + key[:, 1], return_index=True)
-        if len(once) < len(seg):  # a segment given twice also loops forever
-            seg = seg[np.sort(once)]
-        data, switches = {"vertices": pts, "segments": seg}, flags
-    else:  # no constraint left: the points' own (convex hull) triangulation
-        data, switches = {"vertices": pts}, flags.replace("p", "").replace("c", "")
-    try:
-        with _native_stdout_muted():
-            res = triangle.triangulate(data, switches)
-    except (RuntimeError, ValueError, IndexError):  # "invalid geometry on input"
-        return none
-    tris = np.asarray(res.get("triangles", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
-    extra = np.asarray(res["vertices"])[len(pts):]
-    if first is not None:  # back to the caller's ids (the first copy; added vertices after)
-        tris = np.where(tris < len(keep), keep[np.minimum(tris, len(keep) - 1)],
-                        n + tris - len(keep))
-    return tris, extra
-
-
-_STDOUT_LOCK = threading.Lock()
-
-
-def _flush_c_streams() -> None:
-    """Flush the C library's stdio buffers (where native code's printf waits)."""
-    with contextlib.suppress(OSError, AttributeError, TypeError):
-        ctypes.CDLL(None).fflush(None)
-
-
-@contextlib.contextmanager
-def _native_stdout_muted() -> Iterator[None]:
-    """Send what native code prints on file descriptor 1 to the null device meanwhile.
-
-    On an input it cannot take, triangle prints "Internal error in segmentintersection()"
-    (or the like) with C's printf before its wrapper raises; on stdout that text went
-    into ``asrbf fill-holes --json``'s output and made it invalid JSON (a synthetic bunny
-    view, punch seed 8). Python's own stdout is flushed first; one thread at a time.
-    """
-    with _STDOUT_LOCK:
-        try:
-            if sys.stdout is not None:
-                sys.stdout.flush()
-            saved = os.dup(1)
-        except (OSError, ValueError):  # no file descriptor 1: nothing to mute
-            yield
-            return
-        null = os.open(os.devnull, os.O_WRONLY)
-        try:
-            _flush_c_streams()
-            os.dup2(null, 1)
-            yield
-        finally:
-            _flush_c_streams()
-            os.dup2(saved, 1)
-            os.close(saved)
-            os.close(null)
-
-
-#: Points closer than this share of the points' extent are copies of one point.
-_SAME_POINT = 1e-9
-
-
-def _first_copies(pts: np.ndarray) -> np.ndarray | None:
-    """Each point's first copy (smallest index of its group), or None if no two coincide.
-
-    Points chained closer than ``_SAME_POINT`` of the (n, 2) points' extent are copies.
-    """
-    from ._segment_kernels import close_components
-
-    group = close_components(pts, _SAME_POINT * float(np.ptp(pts, axis=0).max()))
-    if group.max() == len(pts) - 1:  # every point a group of its own
-        return None
-    lead = np.full(int(group.max()) + 1, len(pts), dtype=np.int64)
-    np.minimum.at(lead, group, np.arange(len(pts)))
-    return lead[group]
-
-
-def _spans_area(pts: np.ndarray) -> bool:
-    """Whether the (n, 2) points are not all on one line (nor all one point), exactly.
-
-    Exact in floating point: some point lies off the line through the first point and
-    the point farthest from it (orientation test with a relative tolerance of 1e-12).
-    """
-    d = pts - pts[0]
-    far = int(np.argmax(np.abs(d).sum(axis=1)))
-    u = d[far]
-    if not np.any(u):
-        return False
-    cross = u[0] * d[:, 1] - u[1] * d[:, 0]
-    return bool(np.abs(cross).max() > 1e-12 * float(np.abs(u).max()) * float(np.abs(d).max()))
 
 
 def grid_samples(lo: np.ndarray, hi: np.ndarray, spacing: float) -> np.ndarray:

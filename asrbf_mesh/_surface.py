@@ -276,22 +276,16 @@ def _delaunay(xy: np.ndarray, longest: float) -> np.ndarray:
     """Return the counter-clockwise Delaunay triangles of distinct points in the plane.
 
     None has an edge over ``longest``; there are none at all for fewer than three points
-    or points on a line (qhull is not asked).
+    or points on a line.
     """
-    from scipy.spatial import Delaunay, QhullError
+    from ._triangle import delaunay
 
     if len(xy) < 3 or np.linalg.matrix_rank(xy - xy.mean(axis=0), tol=1e-12 * longest) < 2:
         return np.zeros((0, 3), dtype=np.int64)
-    try:
-        tris = Delaunay(xy).simplices.astype(np.int64)
-    except (QhullError, ValueError):  # degenerate input qhull refuses: no patch
-        return np.zeros((0, 3), dtype=np.int64)
+    tris = delaunay(xy)
     p = xy[tris]
     edge = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
-    cross = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-             - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
-    tris = np.where((cross < 0)[:, None], tris[:, [0, 2, 1]], tris)
-    return tris[(edge <= longest) & (cross != 0)]
+    return tris[edge <= longest]
 
 
 def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.ndarray | None,

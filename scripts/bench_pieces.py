@@ -60,6 +60,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scans", nargs="+", metavar="PATH",
                     help="scan files instead of the face map and the bunnies (e.g. the "
                          "views of scripts/synth_views.py); written to their own sections")
+    ap.add_argument("--clouds", action="store_true",
+                    help="with --ratio: each scan as a bare point cloud (the points its "
+                         "triangles use, no faces: an XYZ or NPY file); its own section")
     args = ap.parse_args(argv)
     global _PATHS, _SUFFIX, _CMD
     _PATHS = args.scans
@@ -68,7 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.lod:
         return lod_main(args.seeds)
     if args.ratio:
-        return ratio_main(args.seeds, args.ratio)
+        return ratio_main(args.seeds, args.ratio, clouds=args.clouds)
+    if args.clouds:
+        ap.error("--clouds goes with --ratio")
     found = scans(_PATHS)
     warm = next(iter(found.values()))
     with warnings.catch_warnings():
@@ -175,18 +180,22 @@ def lod_main(seeds: list[int]) -> int:
     return 0
 
 
-def ratio_main(seeds: list[int], reps: int) -> int:
+def ratio_main(seeds: list[int], reps: int, *, clouds: bool = False) -> int:
     """Fit seconds of the piecewise model over the single network's, per scan and seed.
 
     The fits alternate (pieces, single, and two variants of pieces that say where its
     extra time goes: the cut into pieces given, and no tail refinement) ``reps`` times
     per seed and each keeps its fastest run: on a shared machine a slow run says more
     about the neighbours than about the code, and alternating gives every model the same
-    conditions.
+    conditions. With ``clouds`` each scan is the bare point cloud of its triangles'
+    points: the cut triangulates it in the view plane first.
     """
     import asrbf_mesh._pieces as pieces_mod
 
     found = scans(_PATHS)
+    if clouds:
+        found = {name: am.Scan(scan.points[np.unique(scan.faces)], None, source=scan.source)
+                 for name, scan in found.items()}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for scan in found.values():  # compile the kernels and warm the caches first
@@ -196,7 +205,7 @@ def ratio_main(seeds: list[int], reps: int) -> int:
     rows = []
     rounds = pieces_mod.TAIL_ROUNDS
     for name, scan in found.items():
-        cut = am.segment(am.Mesh(scan.points, scan.faces))
+        cut = am.segment(scan.points if clouds else am.Mesh(scan.points, scan.faces))
         runs = {"auto": ("auto", rounds), "1": (1, rounds), "cut": (cut, rounds),
                 "no tails": ("auto", 0)}
         best = {m: {s: np.inf for s in seeds} for m in runs}
@@ -220,10 +229,12 @@ def ratio_main(seeds: list[int], reps: int) -> int:
                      median_worst([best["cut"][s] for s in seeds], ".3f"),
                      median_worst([best["no tails"][s] for s in seeds], ".3f")])
     seeds_s = ", ".join(map(str, seeds))
+    what = " --clouds" if clouds else ""
     body = ("## Piecewise fit time against the single fit (issue 14)"
-            f"{' on other scans' * bool(_SUFFIX)}\n\n"
+            f"{' on other scans' * bool(_SUFFIX)}{', bare point clouds' * clouds}\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
-            f"`python scripts/bench_pieces.py --ratio {reps} --seeds {' '.join(map(str, seeds))}"
+            f"`python scripts/bench_pieces.py --ratio {reps}{what} --seeds "
+            f"{' '.join(map(str, seeds))}"
             f"{_CMD}`"
             f" ({time.perf_counter() - t0:.0f} s)._\n\n"
             f"`am.fit(scan)` (pieces) and `am.fit(scan, pieces=1)` (single) alternate {reps} "
@@ -237,7 +248,7 @@ def ratio_main(seeds: list[int], reps: int) -> int:
             + table(["scan", "single s", "pieces s", "pieces / single", "per seed",
                      "pieces, cut given s", "pieces, no tails s"], rows))
     print(body)
-    write_section("pieces-time" + _SUFFIX, body)
+    write_section("pieces-time" + _SUFFIX + "-clouds" * clouds, body)
     return 0
 
 
