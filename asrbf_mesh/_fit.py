@@ -202,7 +202,7 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
     refine = refine and polish != "none"
     learned, pr, params, polish_seconds = learn_polished(
         hf, cfg, polish, seed=seed, progress=progress, order=order,
-        prune_below=TAIL_PRUNE * cfg.error_threshold if refine else 0.0)
+        prune_below=TAIL_PRUNE * cfg.error_threshold if refine else 0.0, keep_residual=refine)
     added = 0
     if refine:
         tr = time.perf_counter()

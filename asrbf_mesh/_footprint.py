@@ -35,11 +35,7 @@ def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) 
     shape in spirit), so gaps wider than a few samples stay open. Points that span no
     area (fewer than 3, or all on one line) give no triangles.
     """
-    tri = delaunay(xy)
-    p = xy[tri]
-    edges = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
-    tri = tri[edges <= max_edge * spacing]
-    return tri
+    return delaunay(xy, max_edge * spacing)
 
 
 #: Mode ``surface`` still covers the holes no wider than this many sampling spacings both

@@ -407,12 +407,14 @@ def residuals(net: Network, hf: HeightField) -> np.ndarray:
 def learn_polished(hf: HeightField, cfg: FitConfig, polish: str, *, seed: int,
                    progress: bool | None = None,
                    order: Callable[[np.random.Generator], np.ndarray] | None = None,
-                   prune_below: float = 0.0) -> tuple[LearnedState, Any, tuple, float]:
+                   prune_below: float = 0.0, keep_residual: bool = False
+                   ) -> tuple[LearnedState, Any, tuple, float]:
     """Learn a height field, then run ``polish`` (``"weights"``, ``"full"`` or ``"none"``).
 
     With a polish, ``prune_below`` > 0 first drops the learned neurons whose |weight| is
     under it (the default model's refinement, :mod:`asrbf_mesh._pieces`); the polish's
-    ``ebar_before`` stays the learned network's E-bar.
+    ``ebar_before`` stays the learned network's E-bar. ``keep_residual``: the weight
+    polish keeps its network's residual (the tail refinement starts from it).
 
     The learning and batch stage of :func:`fit`, shared with the piecewise fit
     (:mod:`asrbf_mesh._pieces`). Returns the learned state, the polish's result (None
@@ -435,7 +437,7 @@ def learn_polished(hf: HeightField, cfg: FitConfig, polish: str, *, seed: int,
             centers, widths, weights = centers[strong], widths[strong], weights[strong]
     if polish == "weights":  # (the tail refinement after it starts from its residual)
         pr = polish_weights(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
-                            cfg.polish_ridge, keep_residual=prune_below > 0)
+                            cfg.polish_ridge, keep_residual=keep_residual)
     elif polish == "full":
         pr = polish_full(hf.xy, hf.z, a0, centers, widths, weights, cfg.support,
                          iterations=cfg.polish_iterations, ridge=cfg.polish_ridge)

@@ -282,10 +282,7 @@ def _delaunay(xy: np.ndarray, longest: float) -> np.ndarray:
 
     if len(xy) < 3 or np.linalg.matrix_rank(xy - xy.mean(axis=0), tol=1e-12 * longest) < 2:
         return np.zeros((0, 3), dtype=np.int64)
-    tris = delaunay(xy)
-    p = xy[tris]
-    edge = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
-    return tris[edge <= longest]
+    return delaunay(xy, longest)
 
 
 def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.ndarray | None,

@@ -243,3 +243,33 @@ def test_a_cliff_below_the_minimum_step_is_not_cut() -> None:
     assert am.segment(am.Scan(pts, faces), min_step=15.0).n_pieces == 1
     with pytest.raises(am.ConfigError, match="min_step"):
         am.segment(pts, min_step=-1.0)
+
+
+def steep_sine(noise: float = 0.0) -> np.ndarray:
+    """A 100 x 100 grid of the unit square, z = sin(3 pi x) cos(3 pi y): slopes up to 13."""
+    g = np.linspace(0.0, 1.0, 100)
+    x, y = np.meshgrid(g, g)
+    z = np.sin(3 * np.pi * x) * np.cos(3 * np.pi * y)
+    z = z + noise * np.random.default_rng(0).standard_normal(z.shape)
+    return np.c_[x.ravel(), y.ravel(), z.ravel()]
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.005])
+def test_a_steep_smooth_surface_is_one_piece(noise: float) -> None:
+    # its slopes pass the wall angle (13,792 triangles cut into 24 pieces, 180 with the
+    # noise, before rule 1b); a quadratic fits the points around each of them
+    seg = am.segment(steep_sine(noise))
+    assert seg.n_pieces == 1
+    # the cliff next to the same slopes is still cut
+    pts = steep_sine()
+    pts[:, 2] += np.where(pts[:, 0] >= 0.5, 3.0, 0.0)
+    assert am.segment(pts).n_pieces == 2
+
+
+def test_values_that_merely_repeat_are_not_depth_levels() -> None:
+    from asrbf_mesh._segment import depth_quanta
+
+    rng = np.random.default_rng(0)
+    assert depth_quanta(np.repeat(np.sort(rng.random(300)), 3)) is None  # uneven gaps
+    q = depth_quanta(np.repeat(np.arange(300) * 0.25, 3))  # a camera's even levels
+    assert q is not None and float(q.at(np.array([10.0]))[0]) == 0.25
