@@ -273,3 +273,14 @@ def test_values_that_merely_repeat_are_not_depth_levels() -> None:
     assert depth_quanta(np.repeat(np.sort(rng.random(300)), 3)) is None  # uneven gaps
     q = depth_quanta(np.repeat(np.arange(300) * 0.25, 3))  # a camera's even levels
     assert q is not None and float(q.at(np.array([10.0]))[0]) == 0.25
+
+
+def test_steep_smooth_bumps_hold_no_cliff_to_split() -> None:
+    # eight Gaussian bumps, slopes up to 8.6: every flank holds rule 4's jump pairs (two
+    # points two spacings apart, steeper than the wall angle, far apart in depth), and
+    # the splits cut the grid into 36 pieces before those pairs took the smoothness test
+    rng = np.random.default_rng(0)
+    g = np.linspace(0.0, 1.0, 100)
+    x, y = np.meshgrid(g, g)
+    z = sum(np.exp(-((x - a) ** 2 + (y - b) ** 2) / 0.01) for a, b in rng.random((8, 2)))
+    assert am.segment(np.c_[x.ravel(), y.ravel(), z.ravel()]).n_pieces == 1
