@@ -26,7 +26,7 @@ from ._learn import MIN_POINTS, fit_info, learn_polished, polish_kind, residuals
 from ._mesh import Mesh
 from ._network import FitInfo, Network
 from ._outliers import OutlierWarning, describe_isolated, isolated_points
-from ._pieces import TAIL_PRUNE, learn_pieces, refine_tails
+from ._pieces import learn_pieces, refine_tails
 from ._segment import Segmentation, depth_quanta, segment
 from ._validate import check_choice, check_points, check_seed
 from ._version import __version__
@@ -202,7 +202,7 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
     refine = refine and polish != "none"
     learned, pr, params, polish_seconds = learn_polished(
         hf, cfg, polish, seed=seed, progress=progress, order=order,
-        prune_below=TAIL_PRUNE * cfg.error_threshold if refine else 0.0, keep_residual=refine)
+        keep_residual=refine)  # one piece: no weak neuron dropped (see TAIL_PRUNE)
     added = 0
     if refine:
         tr = time.perf_counter()

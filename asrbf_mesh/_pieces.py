@@ -69,12 +69,15 @@ TAIL_QUANTA = 1.5
 #: 99.9th percentiles of the default reconstruction within 0.01 % of the diagonal.
 TAIL_SUPPORT = 3
 #: Tail refinement: neurons whose learned |weight| is under this multiple of E are dropped
-#: before the polish (0: none; the drop after the tails takes the idle ones by their cost
-#: instead). Was 0.3, which saved the polish time (the face map's fit 5-10 %) but raised
-#: E-bar on smooth surfaces with little noise, where many weak neurons carry the fine
-#: shape together: a 300 x 300 grid of z = sin(4x) cos(3y), noise 0.0005, E-bar 0.00091
-#: (single network) -> 0.00106.
-TAIL_PRUNE = 0.0
+#: before the polish of a piece of several (it saves 5-10 % of the face map's fit). A
+#: scan of one piece keeps them all (:func:`~asrbf_mesh._fit.fit`): it learns as the
+#: single network does, and its tails then never leave it worse. Dropped there, they
+#: raised E-bar on smooth surfaces with little noise, where many weak neurons carry the
+#: fine shape together: a 300 x 300 grid of z = sin(4x) cos(3y), noise 0.0005, E-bar
+#: 0.00091 (single network) -> 0.00106. Without the drop in pieces too, the face map's
+#: main piece (seed 8: 1,399 neurons learned) kept 1,040 and fitted in 1.8x the single
+#: network's time.
+TAIL_PRUNE = 0.3
 #: Tail refinement, after the rounds: neurons whose removal (the other weights solved
 #: again) raises the sum of squared errors by less than this many E^2 are dropped
 #: (:func:`~asrbf_mesh._polish.solve_and_drop`).
