@@ -125,11 +125,12 @@ _SPLIT_ROUNDS = 8
 #: 0.03-0.08 (10th-90th percentile) with it, where the slopes of 6-13 cut 2,566-16,705
 #: triangles into up to 180 pieces and raised the fit's E-bar by up to 2x; on the five
 #: dev scans' cut triangles it is 0.05-0.16 on the face map and 0.09-0.50 on the bunnies.
-#: With 0.1 every grid is one piece and the dev scans keep their pieces (bun045 17 -> 16,
-#: bun090 36 -> 33; E-bar and K within 3 %). Rule 4's jump pairs take the same test: on
-#: a grid of eight Gaussian bumps (sigma 7 spacings, height 1: slopes up to 8.6) every
-#: flank held jump pairs, and the splits cut it into 36 pieces at 2.2x the single
-#: network's E-bar.
+#: With 0.1 every grid is one piece and the dev scans keep their pieces (on triangles
+#: alone bun045 17 -> 16, bun090 36 -> 33; E-bar and K within 3 %). Rule 4's jump pairs
+#: take the same test: on a grid of eight Gaussian bumps (sigma 7 spacings, height 1:
+#: slopes up to 8.6) every flank held jump pairs, and the splits cut it into 36 pieces at
+#: 2.2x the single network's E-bar; with both, the face map has 17 pieces (was 20),
+#: bun045 14, bun090 33 (``scripts/bench_segment.py``).
 SMOOTH_FIT = 0.1
 #: Rule 1b: points around a triangle that the quadratic is fitted to.
 _SMOOTH_NEIGHBOURS = 16
