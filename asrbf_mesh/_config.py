@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 from .errors import ConfigError
 
-__all__ = ["FitConfig", "UPDATES", "PRUNINGS", "DECAYS", "POLISHES"]
+__all__ = ["FitConfig", "LOCAL_WIDTH", "UPDATES", "PRUNINGS", "DECAYS", "POLISHES"]
 
 UPDATES = ("nekf", "nekf-neighbourhood", "gekf", "gd")
 PRUNINGS = ("none", "literal", "support")
@@ -37,6 +37,14 @@ Update = Literal["nekf", "nekf-neighbourhood", "gekf", "gd"]
 Pruning = Literal["none", "literal", "support"]
 Decay = Literal["observation", "neurons", "pass"]
 Polish = Literal["none", "weights", "full"]
+
+
+#: ``FitConfig.local_width`` of the default model. The face map's seed 8 without it: one
+#: step of a neuron 0.37 wide (the unit square's), the nearest to a point at the rim with
+#: an error of 0.17, moved its centre by 0.15; the windowed RMS error rose from 0.008 to
+#: 0.024 and growth added about 800 neurons (the main piece learned 1,379, against 435-641
+#: on seeds 0-9). With 8: 441-616 (``scripts/bench_pieces.py``; BENCHMARKS, "pieces").
+LOCAL_WIDTH = 8.0
 
 
 @dataclass(frozen=True)
@@ -119,6 +127,17 @@ class FitConfig:
         Tikhonov weight pulling polished parameters toward the learned ones,
         relative to the mean diagonal of the normal equations; keeps neurons
         with little data under them (holes, borders) where learning left them.
+    local_width : float or None
+        Keeps an NEKF step local. One observation speaks for its neighbourhood, about
+        the current separation D across, but its nearest neuron may be far wider (an
+        early wide neuron at the rim, beside later narrow ones), and a full step there
+        reshapes the surface over its whole width. A neuron wider than
+        ``local_width * D`` takes the step scaled by ``local_width * D / sigma``.
+        ``None`` (default): :data:`LOCAL_WIDTH` for the pieces of the default model
+        (``fit(pieces="auto")`` on a scan cut in several), off wherever one network
+        learns (``pieces=1``, a scan of one piece, :func:`~asrbf_mesh.learn`, the
+        streaming fit); 0: off. See
+        docs/design.md, "A local NEKF step".
     """
 
     error_threshold: float = 0.01
@@ -146,6 +165,7 @@ class FitConfig:
     polish: Polish = "weights"
     polish_iterations: int = 4
     polish_ridge: float = 1e-4
+    local_width: float | None = None
 
     def __post_init__(self) -> None:
         def check(name: str, test: Any, want: str, optional: bool) -> None:
@@ -191,6 +211,7 @@ class FitConfig:
         real("prune_threshold", lo_open=False, hi=1.0)
         real("process_noise", lo_open=False)
         real("polish_ridge", lo_open=False)
+        real("local_width", lo_open=False, optional=True)
         if self.d_min is not None and self.d_min > self.d_max:
             raise ConfigError(f"d_min ({self.d_min}) must not exceed d_max ({self.d_max})")
         for name in ("window", "passes", "max_neighbours"):

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from . import _config
-from ._config import FitConfig
+from ._config import LOCAL_WIDTH, FitConfig
 from ._frame import HeightField, to_height_field
 from ._io import Scan
 from ._jit_cache import compile_seconds
@@ -151,9 +151,13 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     common = (source, source_hash(points), int(seed), n_stray or None)
     if seg is None or seg.n_pieces == 1 or (pieces == "auto" and _scattered(seg)):
         # the paper's single network (pieces=1) is learned and polished as it was; the
-        # default model, one piece or scattered, also gets its tails refined
+        # default model, one piece or scattered, learns as it and gets its tails refined
+        if cfg.local_width is None:
+            cfg = cfg.replace(local_width=0.0)
         return _fit_single(hf, cfg, polish, seed, progress, order, t0, *common,
                            refine=pieces != "1")
+    if cfg.local_width is None:  # the pieces keep their steps local
+        cfg = cfg.replace(local_width=LOCAL_WIDTH)
     return _fit_pieces(hf, seg, cfg, polish, seed, progress, t0, *common)
 
 

@@ -131,6 +131,7 @@ class _State:
         cf[_lk.CF_GD] = cfg.gd_rate
         cf[_lk.CF_SMIN], cf[_lk.CF_SMAX] = _SIGMA_RANGE
         cf[_lk.CF_BOXLO], cf[_lk.CF_BOXHI] = _CENTRE_BOX
+        cf[_lk.CF_LOCAL] = cfg.local_width or 0.0  # None: off (the paper's step)
         ci[_lk.CI_WINDOW] = window
         ci[_lk.CI_PWIN] = prune_window
         ci[_lk.CI_PRUNE] = ("none", "literal", "support").index(cfg.pruning)

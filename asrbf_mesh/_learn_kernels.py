@@ -50,7 +50,8 @@ CF_SMIN = 13  # width clamp
 CF_SMAX = 14
 CF_BOXLO = 15  # centre box
 CF_BOXHI = 16
-CF_SIZE = 17
+CF_LOCAL = 17  # a neuron wider than this many D takes a scaled NEKF step (0: off)
+CF_SIZE = 18
 
 # integer configuration ``ci``
 CI_WINDOW = 0  # omega, RMS window
@@ -617,8 +618,13 @@ def _make_run_steps(update: int, prune_mode: int, decay: int):
                         for b_ in range(4):
                             acc += P[s, a_, b_] * g[b_]
                         pb[a_] = acc
+                    # a local step: a neuron far wider than the separation D (the
+                    # observation's neighbourhood) moves in proportion (local_width)
+                    scale = 1.0
+                    if cf[CF_LOCAL] > 0.0 and W[s, 1] > cf[CF_LOCAL] * D:
+                        scale = cf[CF_LOCAL] * D / W[s, 1]
                     for a_ in range(4):
-                        dw[a_] = pb[a_] * r / S
+                        dw[a_] = scale * pb[a_] * r / S
                     _apply_step(W, s, dw, cf)
                     sig = W[s, 1]
                     for a_ in range(4):

@@ -134,8 +134,6 @@ _SPLIT_ROUNDS = 8
 SMOOTH_FIT = 0.1
 #: Rule 1b: points around a triangle that the quadratic is fitted to.
 _SMOOTH_NEIGHBOURS = 16
-#: Rule 1b: triangles measured at once (memory: 16 x 6 doubles each).
-_SMOOTH_CHUNK = 20_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -333,7 +331,8 @@ def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
     return cut | ~(area2 > 0), median
 
 
-def _smooth_across(local: np.ndarray, tris: np.ndarray) -> np.ndarray:
+def _smooth_across(local: np.ndarray, tris: np.ndarray, grid: tuple | None = None
+                   ) -> np.ndarray:
     """Whether a quadratic height field fits the points around each triangle (rule 1b).
 
     The :data:`_SMOOTH_NEIGHBOURS` points nearest to the triangle's centroid in the view
@@ -341,34 +340,21 @@ def _smooth_across(local: np.ndarray, tris: np.ndarray) -> np.ndarray:
     surface when that fit's RMS residual is under :data:`SMOOTH_FIT` times the
     triangle's own depth extent. Across a cliff the neighbours hold both levels and a
     quadratic misses them by a good part of the step; on a steep but smooth slope it
-    misses by the noise. ``tris`` may hold pairs of points too (rule 4's jump pairs).
+    misses by the noise. ``tris`` may hold pairs of points too (rule 4's jump pairs);
+    ``grid`` is :func:`~asrbf_mesh._grid_knn.point_grid` of the view-plane points when
+    the caller has it. Compiled (``_segment_kernels.smooth_fits``): numpy's batched
+    6 x 6 solves and a k-d tree took 31 ms of the face map's cut as a cloud, holding
+    the interpreter's lock while the frame's measures ran beside it.
     """
-    from scipy.spatial import cKDTree
+    from ._grid_knn import point_grid
+    from ._segment_kernels import smooth_fits
 
-    xy, z = local[:, :2], local[:, 2]
+    xy = np.ascontiguousarray(local[:, :2])
     k = min(_SMOOTH_NEIGHBOURS, len(local))
-    out = np.zeros(len(tris), dtype=bool)
-    if k < 6:
-        return out
-    tree = cKDTree(xy)
-    for lo in range(0, len(tris), _SMOOTH_CHUNK):
-        t = tris[lo:lo + _SMOOTH_CHUNK]
-        cen = xy[t].mean(axis=1)
-        _, nb = tree.query(cen, k=k)
-        p = xy[nb] - cen[:, None, :]
-        reach = np.sqrt((p * p).sum(axis=2)).max(axis=1)
-        p /= np.maximum(reach, 1e-300)[:, None, None]
-        u, v = p[..., 0], p[..., 1]
-        a = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=-1)
-        zn = z[nb] - z[nb].mean(axis=1, keepdims=True)
-        ata = np.einsum("mki,mkj->mij", a, a) + 1e-9 * np.eye(6)
-        coef = np.linalg.solve(ata, np.einsum("mki,mk->mi", a, zn)[..., None])[..., 0]
-        res = zn - np.einsum("mki,mi->mk", a, coef)
-        rms = np.sqrt((res * res).mean(axis=1))
-        zt = z[t]
-        extent = zt.max(axis=1) - zt.min(axis=1)
-        out[lo:lo + len(t)] = rms < SMOOTH_FIT * extent
-    return out
+    if k < 6 or len(tris) == 0:
+        return np.zeros(len(tris), dtype=bool)
+    return smooth_fits(xy, local[:, 2], tris, k, SMOOTH_FIT,
+                       point_grid(xy) if grid is None else grid)
 
 
 def _components(n: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

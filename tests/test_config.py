@@ -64,6 +64,8 @@ def test_from_dict_rejects_unknown_fields() -> None:
     ({"prune_threshold": float("nan")}, "prune_threshold must be a number in"),
     ({"process_noise": -1e-3}, "process_noise must be a finite number >= 0"),
     ({"polish_ridge": float("inf")}, "polish_ridge must be a finite number >= 0"),
+    ({"local_width": -1.0}, "local_width must be a finite number >= 0"),
+    ({"local_width": float("nan")}, "local_width must be a finite number >= 0"),
     ({"window": 0}, "window must be an integer >= 1"),
     ({"passes": 1.5}, "passes must be an integer >= 1"),
     ({"max_neighbours": 0}, "max_neighbours must be an integer"),

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import asrbf_mesh as am
-from asrbf_mesh._config import FitConfig
+from asrbf_mesh._config import LOCAL_WIDTH, FitConfig
 from asrbf_mesh._frame import HeightFieldWarning, to_height_field
 from asrbf_mesh._learn import MIN_POINTS, LearnedState, auto_d_min, learn, residuals
 from asrbf_mesh.errors import ScanError
@@ -266,6 +266,37 @@ def test_different_seeds_differ(franke40) -> None:
     assert a.n_neurons != b.n_neurons or not np.array_equal(a.centers, b.centers)
     # but both fit: measured E-bar 0.0030 and 0.0034
     assert a.info["ebar"] < 0.015 and b.info["ebar"] < 0.015
+
+
+def test_a_local_step_holds_a_wide_neuron_in_place(franke40) -> None:
+    """A neuron wider than local_width x D takes its NEKF step scaled by local_width D / sigma."""
+    hf = to_height_field(franke40)
+    base = {"passes": 1, "pruning": "none"}
+    paper = learn(hf, FitConfig(**base), seed=3)  # None: the paper's step, as 0
+    off = learn(hf, FitConfig(**base, local_width=0.0), seed=3)
+    for name in ("centers", "widths", "weights"):
+        assert getattr(paper, name).tobytes() == getattr(off, name).tobytes()
+
+    def moved(st: LearnedState) -> np.ndarray:  # each centre's distance from its point
+        d = np.linalg.norm(st.centers[:, None, :] - hf.xy[None, :, :], axis=2)
+        return d.min(axis=1)
+
+    # every neuron is born on an observation; with a vanishing local width no step
+    # moves it (measured: at most 9e-10), with the paper's step they travel (0.08)
+    held = learn(hf, FitConfig(**base, local_width=1e-9), seed=3)
+    assert moved(held).max() < 1e-6
+    assert moved(off).max() > 1e-3
+
+
+def test_the_pieces_keep_their_steps_local(franke40) -> None:
+    x, y = np.meshgrid(np.linspace(0, 1, 40), np.linspace(0, 1, 40))
+    cliff = np.c_[x.ravel(), y.ravel(), np.where(x < 0.5, 0.0, 0.5).ravel()]
+    assert fit(cliff).n_pieces == 2
+    assert fit(cliff).config.local_width == LOCAL_WIDTH == 8.0
+    assert fit(cliff, local_width=2.0).config.local_width == 2.0
+    # one network learns as the paper's: pieces=1, and a scan of one piece
+    assert fit(cliff, pieces=1).config.local_width == 0.0
+    assert fit(franke40).n_pieces == 1 and fit(franke40).config.local_width == 0.0
 
 
 def test_learn_returns_the_raw_state(franke40) -> None:

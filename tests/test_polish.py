@@ -313,7 +313,8 @@ def test_appended_weights_are_the_local_least_squares_weights(learned) -> None:
     res = hf.z - first.a0 - dense_design(hf.xy, first.centers, first.widths, first.weights,
                                          3.5, False)[:, 1:] @ first.weights
     cfg = FitConfig()
-    got = _appended_weights(ata, atz, first.a0, first.weights, cfg.polish_ridge)
+    got, kept = _appended_weights(ata, atz, first.a0, first.weights, cfg.polish_ridge)
+    assert kept.all()
     ref = _local_weights(hf.xy, res, st.centers[-6:], st.widths[-6:], cfg)
     np.testing.assert_allclose(got, ref, rtol=1e-8, atol=1e-10)
     assert np.abs(got).max() > 1e-3

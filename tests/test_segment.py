@@ -208,6 +208,53 @@ def test_close_components_match_scipy_on_the_pairs_graph(seed: int) -> None:
     assert len(np.unique(got)) > 5  # the case has several components to tell apart
 
 
+def test_close_components_find_copies_a_billionth_of_the_extent_apart() -> None:
+    """The grid holds 1.4e9 cells a side here (triangulate's test for copies of a point)."""
+    from asrbf_mesh._segment_kernels import close_components
+
+    rng = np.random.default_rng(5)
+    xy = rng.uniform(0, 100, (2000, 2))
+    copies = rng.choice(2000, 40, replace=False)
+    near = xy[copies] + rng.uniform(-2e-8, 2e-8, (40, 2))  # within 1e-9 of the extent
+    pts = np.vstack([xy, near])
+    got = close_components(pts, 1e-9 * 100)
+    want = np.arange(2040)
+    want[2000:] = copies
+    assert got.tolist() == np.unique(want, return_inverse=True)[1].tolist()
+
+
+def test_smooth_fits_match_numpy_least_squares() -> None:
+    """The compiled rule 1b against a k-d tree and numpy's least squares, row by row."""
+    from scipy.spatial import cKDTree
+
+    from asrbf_mesh._grid_knn import point_grid
+    from asrbf_mesh._segment_kernels import smooth_fits
+
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(0, 1, (3000, 2))
+    z = np.sin(3 * xy[:, 0]) + np.where(xy[:, 1] > 0.5, 0.3, 0.0) + rng.normal(0, 0.002, 3000)
+    tree = cKDTree(xy)
+    near_cliff = np.flatnonzero(np.abs(xy[:, 1] - 0.5) < 0.03)
+    # small triangles: a point and its two nearest, half of them at the step
+    rows = tree.query(xy[np.r_[rng.choice(3000, 300), rng.choice(near_cliff, 300)]], k=3)[1]
+    got = smooth_fits(xy, z, rows, 16, 0.1, point_grid(xy))
+    _, nb = tree.query(xy[rows].mean(axis=1), k=16)
+    want = []
+    for t, n in zip(rows, nb, strict=True):
+        p = xy[n] - xy[t].mean(axis=0)
+        p /= np.linalg.norm(p, axis=1).max()
+        a = np.c_[np.ones(16), p, p[:, 0] ** 2, p[:, 0] * p[:, 1], p[:, 1] ** 2]
+        zn = z[n] - z[n].mean()
+        res = zn - a @ np.linalg.lstsq(a, zn, rcond=None)[0]
+        want.append(np.sqrt((res ** 2).mean()) < 0.1 * np.ptp(z[t]))
+    assert got.tolist() == want
+    assert 50 < got.sum() < 550  # both answers occur (measured: 172 of 600)
+    pairs = smooth_fits(xy, z, rows[:200, :2], 16, 0.1, point_grid(xy))  # rule 4's pairs
+    assert pairs.shape == (200,)
+    with pytest.raises(ValueError, match="indexes no point"):
+        smooth_fits(xy, z, np.array([[0, 1, 3000]]), 16, 0.1, point_grid(xy))
+
+
 def test_close_components_reject_bad_input() -> None:
     from asrbf_mesh._segment_kernels import close_components
 
