@@ -94,19 +94,6 @@ IDLE_GIVE_BACK = 0.25
 #: percentiles of the default reconstruction up by 0.00-0.04 % of the diagonal (desk
 #: 0.51 and 0.48 %).
 IDLE_NOISE_SHARE = 0.1
-#: Tail refinement: the neurons a round appends whose removal (the others of the round
-#: solved again, the older ones fixed) raises the sum of squared errors by less than
-#: ``IDLE_RSS`` x E^2 never join, while together they give back at most this share of
-#: what the round gained (:func:`_appended_weights`), taken from the drop's own share
-#: (``IDLE_GIVE_BACK``: the two together give back no more than the drop alone). The
-#: drop after the rounds took most of them anyway, at the price of a dense inverse over
-#: every neuron: on the face map (seeds 0, 2, 5) it took 266-291 of the 416-447 neurons
-#: the rounds appended. Face map, seeds 0, 2, 5, 6, 8: the drop 0.064 -> 0.034 s, the tail
-#: refinement 0.125 -> 0.100 s of a 0.52 s fit; seeds 0-9: K 720 -> 732, E-bar 0.00188
-#: both (medians); the bunnies' K 0-1 % up, E-bar within 0.5 %. As a share of its own
-#: (not taken from the drop's) it gave E-bar 2-3 % higher on the bunnies and the
-#: reconstruction's 99.9th percentile 0.60 % on bun000.
-TAIL_GIVE_BACK = 0.1
 #: Tail refinement: after the drop, points above this multiple of the threshold get neurons.
 REFILL_FACTOR = 1.5
 #: Tail refinement: the result is kept unless its mean error exceeds the polished
@@ -340,11 +327,8 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     fraction). Each round extends the weight polish's normal equations (``polished``,
     its :class:`~asrbf_mesh._polish.PolishResult`) by the new neurons' columns, over the
     points under them (:func:`~asrbf_mesh._polish.extend_normal`), and takes that solve
-    from them (:func:`_appended_weights`), which leaves out at once the new neurons
-    hardly worth their place (under ``IDLE_RSS`` x E^2 each, together at most
-    :data:`TAIL_GIVE_BACK` of the round's gain, taken from the drop's share). Stops
-    when no point is left above the threshold, after ``TAIL_ROUNDS`` or at the neuron
-    cap (``max_neurons``).
+    from them (:func:`_appended_weights`). Stops when no point is left above the
+    threshold, after ``TAIL_ROUNDS`` or at the neuron cap (``max_neurons``).
 
     Then all the weights are solved together once, from those extended normal
     equations, and the neurons
@@ -376,7 +360,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
 
         ``res`` is ``z - f`` of this network when known (measured by the solve before).
         """
-        nonlocal grid, slope2, limit, normal, given
+        nonlocal grid, slope2, limit, normal
         piece = Piece(a0, centers, widths, weights)
         if res is None:
             res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
@@ -420,24 +404,12 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             # neurons: the last solve needs them, and they hold the local solve's
             ata, atz = extend_normal(sub.xy, sub.z, normal, grown_c, grown_w,
                                      np.r_[weights, np.zeros(len(sigma))], cfg.support)
-            a_new, kept, cost = _appended_weights(ata, atz, a0, weights, cfg.polish_ridge,
-                                                  idle, TAIL_GIVE_BACK)
-            given += cost
-            if not kept.all():  # new neurons hardly worth their place never join
-                cols = np.r_[np.arange(len(weights) + 1), len(weights) + 1 + np.flatnonzero(kept)]
-                ata, atz = ata[np.ix_(cols, cols)], atz[cols]
-                grown_c, grown_w = grown_c[:len(weights)], grown_w[:len(weights)]
-                grown_c = np.vstack([grown_c, new[kept]])
-                grown_w = np.r_[grown_w, sigma[kept]]
             normal = replace(normal, ata=ata, atz=atz)
-            if len(a_new) == 0:
-                return centers, widths, weights, 0
+            a_new = _appended_weights(ata, atz, a0, weights, cfg.polish_ridge)
         else:
             a_new = _local_weights(sub.xy, res, new, sigma, cfg)
-        return grown_c, grown_w, np.r_[weights, a_new], len(a_new)
+        return grown_c, grown_w, np.r_[weights, a_new], len(picked)
 
-    idle = IDLE_RSS * cfg.error_threshold ** 2
-    given = 0.0  # the sum of squares the neurons left out as they were appended gave back
     tolerance = IDLE_TOLERANCE if quantum is None else IDLE_TOLERANCE_LEVELS
     added = 0
     # the polish measured its network's residual: the first round starts from it
@@ -450,16 +422,14 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         if n == 0:
             break
         added += n
+    idle = IDLE_RSS * cfg.error_threshold ** 2
     if normal is not None:
         # the polish's normal equations extended by the new neurons' columns, solved,
         # and the neurons the network hardly needs dropped, from one dense inverse
         base = np.concatenate([[polished.a0], polished.weights, np.zeros(added)])
         got = solve_and_drop(sub.xy, sub.z, normal.ata, normal.atz, a0, centers, widths,
                              weights, cfg.support, cfg.polish_ridge, idle, base=base,
-                             give_back=IDLE_GIVE_BACK,
-                             # the neurons left out on appending took from the same share
-                             extra=_noise_budget(polished, quantum)
-                             - (1.0 - IDLE_GIVE_BACK) * given)
+                             give_back=IDLE_GIVE_BACK, extra=_noise_budget(polished, quantum))
         if got is not None:
             pr, dropped = got
             if added + dropped == 0 \
@@ -492,54 +462,20 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
 
 
 def _appended_weights(ata: np.ndarray, atz: np.ndarray, a0: float, weights: np.ndarray,
-                      ridge: float, limit: float = 0.0, share: float = 0.0
-                      ) -> tuple[np.ndarray, np.ndarray, float]:
+                      ridge: float) -> np.ndarray:
     """Least-squares weights of the neurons appended after ``weights``, the others fixed.
 
     From the extended normal equations (columns ``[a0, weights, appended]``): the
     appended block ``B = A_n'A_n`` and ``A_n'r = A_n'z - A_n'A_o (a0, weights)``, ``r``
     the residual under the old neurons; ridged as the polish. The same solution as
     :func:`_local_weights` on that residual, without a pass over the points.
-
-    Returns ``(weights of the appended neurons kept, which are kept, the rise in the sum
-    of squared errors their removals cost)``. With ``limit``,
-    the appended neurons whose removal raises the sum of squared errors by less than it
-    go, one at a time (:func:`~asrbf_mesh._network_kernels.eliminate` on ``B``'s
-    inverse): the drop after the rounds would take them, at the cost of a dense
-    inverse of every neuron's normal equations. On the face map (seeds 0, 2, 5) the
-    rounds appended 416-447 neurons and the drop took 266-291 of them.
     """
-    import scipy.linalg as sla
-
-    from ._network_kernels import eliminate
-    from ._polish import DENSE_MAX, _one_blas_thread, _ridged, _solve_spd
+    from ._polish import _ridged, _solve_spd
 
     k = len(weights) + 1
-    m = ata.shape[0] - k
     rhs = atz[k:] - ata[k:, :k] @ np.concatenate([[a0], weights])
-    block = _ridged(ata[k:, k:], ridge)
-    kept = np.ones(m, dtype=bool)
-    info = 1
-    if limit > 0 and m < DENSE_MAX:
-        with _one_blas_thread():
-            chol, info = sla.lapack.dpotrf(block, lower=1)
-            if info == 0:
-                a, info = sla.lapack.dpotrs(chol, rhs, lower=1)
-            if info == 0:
-                inv, info = sla.lapack.dpotri(chol, lower=1)
-    if info != 0 or not np.all(np.isfinite(a)):  # no drop: the polish's solver
-        a = _solve_spd(block, rhs)
-        return np.where(np.isfinite(a), a, 0.0), kept, 0.0
-    # unknown 0 of the elimination is the bias it always keeps: here none (a zero row)
-    padded = np.zeros((m + 1, m + 1))
-    padded[0, 0] = 1.0
-    padded[1:, 1:] = inv
-    w = np.r_[0.0, a]
-    gained = float(rhs @ a)  # the sum of squares they gained: rhs' B^-1 rhs
-    kept[eliminate(padded, w, float(limit), share * max(gained, 0.0)) - 1] = False
-    w = w[1:]
-    given = gained - float(2.0 * (w @ rhs) - w @ (block @ w))  # what the kept ones gain
-    return w[kept], kept, max(given, 0.0)
+    a = _solve_spd(_ridged(ata[k:, k:], ridge), rhs)
+    return np.where(np.isfinite(a), a, 0.0)
 
 
 def _local_weights(xy: np.ndarray, res: np.ndarray, centers: np.ndarray, sigma: np.ndarray,
