@@ -331,8 +331,7 @@ def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
     return cut | ~(area2 > 0), median
 
 
-def _smooth_across(local: np.ndarray, tris: np.ndarray, grid: tuple | None = None
-                   ) -> np.ndarray:
+def _smooth_across(local: np.ndarray, tris: np.ndarray) -> np.ndarray:
     """Whether a quadratic height field fits the points around each triangle (rule 1b).
 
     The :data:`_SMOOTH_NEIGHBOURS` points nearest to the triangle's centroid in the view
@@ -340,9 +339,8 @@ def _smooth_across(local: np.ndarray, tris: np.ndarray, grid: tuple | None = Non
     surface when that fit's RMS residual is under :data:`SMOOTH_FIT` times the
     triangle's own depth extent. Across a cliff the neighbours hold both levels and a
     quadratic misses them by a good part of the step; on a steep but smooth slope it
-    misses by the noise. ``tris`` may hold pairs of points too (rule 4's jump pairs);
-    ``grid`` is :func:`~asrbf_mesh._grid_knn.point_grid` of the view-plane points when
-    the caller has it. Compiled (``_segment_kernels.smooth_fits``): numpy's batched
+    misses by the noise. ``tris`` may hold pairs of points too (rule 4's jump pairs).
+    Compiled (``_segment_kernels.smooth_fits``): numpy's batched
     6 x 6 solves and a k-d tree took 31 ms of the face map's cut as a cloud, holding
     the interpreter's lock while the frame's measures ran beside it.
     """
@@ -353,8 +351,7 @@ def _smooth_across(local: np.ndarray, tris: np.ndarray, grid: tuple | None = Non
     k = min(_SMOOTH_NEIGHBOURS, len(local))
     if k < 6 or len(tris) == 0:
         return np.zeros(len(tris), dtype=bool)
-    return smooth_fits(xy, local[:, 2], tris, k, SMOOTH_FIT,
-                       point_grid(xy) if grid is None else grid)
+    return smooth_fits(xy, local[:, 2], tris, k, SMOOTH_FIT, point_grid(xy))
 
 
 def _components(n: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
