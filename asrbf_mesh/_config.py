@@ -42,8 +42,10 @@ Polish = Literal["none", "weights", "full"]
 #: ``FitConfig.local_width`` of the default model. The face map's seed 8 without it: one
 #: step of a neuron 0.37 wide (the unit square's), the nearest to a point at the rim with
 #: an error of 0.17, moved its centre by 0.15; the windowed RMS error rose from 0.008 to
-#: 0.024 and growth added about 800 neurons (the main piece learned 1,379, against 435-641
-#: on seeds 0-9). With 8: 441-616 (``scripts/bench_pieces.py``; BENCHMARKS, "pieces").
+#: 0.024 and growth added about 800 neurons (the main piece learned 1,379). With 8 it
+#: learns 641 there, 444-641 over seeds 0-9 (the largest of ``fit(face, seed=s).pieces``,
+#: its ``log.counters()["added"]``); the face map's K over seeds 0-9 715 (worst 1,074) ->
+#: 713 (767) (``scripts/bench_pieces.py``; BENCHMARKS, "Piecewise model").
 LOCAL_WIDTH = 8.0
 
 
