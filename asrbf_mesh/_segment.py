@@ -347,10 +347,10 @@ def _smooth_across(local: np.ndarray, tris: np.ndarray) -> np.ndarray:
     from ._grid_knn import point_grid
     from ._segment_kernels import smooth_fits
 
+    if len(tris) == 0:  # (no grid to build)
+        return np.zeros(0, dtype=bool)
     xy = np.ascontiguousarray(local[:, :2])
-    k = min(_SMOOTH_NEIGHBOURS, len(local))
-    if k < 6 or len(tris) == 0:
-        return np.zeros(len(tris), dtype=bool)
+    k = min(_SMOOTH_NEIGHBOURS, len(local))  # under 6 points: no quadratic, none smooth
     return smooth_fits(xy, local[:, 2], tris, k, SMOOTH_FIT, point_grid(xy))
 
 
