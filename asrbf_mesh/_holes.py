@@ -320,7 +320,7 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                                       "scan units)"))
             continue
         v, t, reason = firsts[j]
-        if len(t) and not _fits(t, loop, known):
+        if not len(t) or not _fits(t, loop, known):  # refused, or no plane fill at all
             if len(np.unique(loop)) < len(loop):  # pinched: each cycle on its own
                 v, t, reason = _fill_cycles(loop, vertices, step, scan_points, tree, known,
                                             R, ccw)

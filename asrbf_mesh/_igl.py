@@ -6,7 +6,7 @@ import numpy as np
 
 from ._mesh import Mesh
 
-__all__ = ["point_mesh_distance", "boundary_loops", "k_harmonic"]
+__all__ = ["point_mesh_distance", "boundary_loops", "k_harmonic", "orient_faces"]
 
 
 def point_mesh_distance(points: np.ndarray, mesh: Mesh) -> np.ndarray:
@@ -47,3 +47,11 @@ def k_harmonic(V: np.ndarray, F: np.ndarray, b: np.ndarray, bc: np.ndarray, k: i
     if len(b) == 0 or b.min() < 0 or b.max() >= len(V) or len(np.unique(b)) != len(b):
         raise ValueError("k_harmonic: fixed vertices must be distinct vertex indices")
     return np.asarray(igl.harmonic(V, F, b, bc, int(k)), dtype=np.float64)
+
+
+def orient_faces(faces: np.ndarray) -> np.ndarray:
+    """Faces flipped so that each orientable connected patch turns one way (libigl's BFS)."""
+    import igl
+
+    out, _ = igl.bfs_orient(np.ascontiguousarray(faces, dtype=np.int64))
+    return np.asarray(out, dtype=np.int64)

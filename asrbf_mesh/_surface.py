@@ -553,25 +553,6 @@ def _snap(net: Network, pts: np.ndarray, piece: np.ndarray, scan_xy: np.ndarray,
         if len(idx) and len(mine):
             pts[idx] = mine[cKDTree(mine).query(pts[idx])[1]]
     return pts, outside
-    pts = pts.copy()
-
-    def owners(xy: np.ndarray) -> np.ndarray:
-        return net.piece_at(xy) if net.n_pieces > 1 else np.zeros(len(xy), np.int64)
-
-    owner = owners(scan_xy)
-    use_rim = rim is not None and not onto
-    rim_owner = owners(0.5 * (rim[0] + rim[1])) if use_rim and rim is not None else None
-    for p in np.unique(piece[stray]):
-        mine = scan_xy[owner == p]
-        sel = rim_owner == p if rim_owner is not None else None
-        to_rim = outside & (piece == p) if sel is not None and sel.any() else None
-        idx = np.flatnonzero(stray & (piece == p) & (True if to_rim is None else ~to_rim))
-        if len(idx) and len(mine):
-            pts[idx] = mine[cKDTree(mine).query(pts[idx])[1]]
-        if to_rim is not None and rim is not None and sel is not None:
-            idx = np.flatnonzero(to_rim)
-            pts[idx] = _nearest_on_segments(pts[idx], rim[0][sel], rim[1][sel])
-    return pts, outside
 
 
 def _nearest_on_segments(q: np.ndarray, a: np.ndarray, b: np.ndarray, k: int = 8

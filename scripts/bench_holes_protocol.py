@@ -25,15 +25,17 @@ from __future__ import annotations
 import argparse
 import concurrent.futures as cf
 import os
+import re
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _bench_common import label, machine, scans, table, write_section  # noqa: E402
+from _bench_common import BUNNIES, label, machine, scans, table, write_section  # noqa: E402
 
 
 def _case(args: tuple[str, int, bool, str, bool]) -> dict:
@@ -106,16 +108,57 @@ def _init(names: list[str]) -> None:
     _SCANS.update(scans(names))
 
 
+def _other_case(args: tuple[str, int, str]) -> dict:
+    """A scan's natural holes, or a synthetic holed scan, in a worker: fill and check.
+
+    ``(name, seed, pieces)``: ``name`` is a scan's (its own holes, as it is) or
+    ``synth:<kind>`` (:func:`asrbf_mesh.evaluate._synthetic_holes.synthetic_holes`).
+    Returns the holes found and filled, the reasons of those left open and the checks
+    that failed: vertices finite, the scan's own points kept as they are, no triangle with
+    a vertex twice, no edge with more triangles than the scan's own edges have.
+    """
+    import warnings
+
+    import asrbf_mesh as am
+    from asrbf_mesh.evaluate._synthetic_holes import synthetic_holes
+
+    name, seed, pieces = args
+    warnings.simplefilter("ignore")
+    scan = synthetic_holes(name[6:], seed) if name.startswith("synth:") else _SCANS[name]
+    res = am.fill_holes(scan, seed=seed, progress=False, pieces=pieces)
+    out_f, n = res.mesh.faces, scan.n_points
+
+    def most_faces_per_edge(f: np.ndarray) -> int:
+        e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        return int(np.unique(e, axis=0, return_counts=True)[1].max()) if len(e) else 0
+
+    failed = [what for what, ok in (
+        ("finite", bool(np.isfinite(res.mesh.vertices).all())),
+        ("scan kept", bool(np.array_equal(res.mesh.vertices[:n], scan.points))),
+        ("no repeated vertex", not bool(np.any((out_f[:, 0] == out_f[:, 1])
+                                               | (out_f[:, 1] == out_f[:, 2])
+                                               | (out_f[:, 0] == out_f[:, 2])))),
+        ("edges", most_faces_per_edge(out_f) <= max(2, most_faces_per_edge(scan.faces))),
+    ) if not ok]
+    return {"name": name, "seed": seed, "found": res.holes_found, "filled": res.holes_filled,
+            "open": [h.reason or "not filled" for h in res.holes if not h.filled],
+            "failed": failed}
+
+
 def run(names: list[str], seeds: list[int], poisson: bool, pieces: str, workers: int,
-        peers: bool = False) -> tuple[list[dict], list[tuple[str, int, str]]]:
-    """Every (scan, seed) case; crashed or failed cases are returned apart."""
-    cases = [(n, s, poisson, pieces, peers) for n in names for s in seeds]
+        peers: bool = False, cases: list[tuple] | None = None, fn=None
+        ) -> tuple[list[dict], list[tuple[str, int, str]]]:
+    """Every (scan, seed) case (or ``cases`` through ``fn``); crashed or failed cases are
+    returned apart."""
+    fn = fn or _case
+    if cases is None:
+        cases = [(n, s, poisson, pieces, peers) for n in names for s in seeds]
     done: list[dict] = []
     bad: list[tuple[str, int, str]] = []
     todo = list(cases)
     while todo:
         with cf.ProcessPoolExecutor(workers, initializer=_init, initargs=(names,)) as ex:
-            futures = {ex.submit(_case, c): c for c in todo}
+            futures = {ex.submit(fn, c): c for c in todo}
             todo = []
             broken = False
             for fut in cf.as_completed(futures):
@@ -123,7 +166,8 @@ def run(names: list[str], seeds: list[int], poisson: bool, pieces: str, workers:
                 try:
                     done.append(fut.result())
                     r = done[-1]
-                    print(f"{c[0]} seed {c[1]}: {len(r['rms'])} enclosed, "
+                    found = len(r["rms"]) if "rms" in r else r["found"]
+                    print(f"{c[0]} seed {c[1]}: {found} holes, "
                           f"{sum(w is not None for w in r['open'])} open", flush=True)
                 except cf.process.BrokenProcessPool:
                     broken = True
@@ -134,7 +178,7 @@ def run(names: list[str], seeds: list[int], poisson: bool, pieces: str, workers:
                 for c in todo:
                     with cf.ProcessPoolExecutor(1, initializer=_init, initargs=(names,)) as one:
                         try:
-                            done.append(one.submit(_case, c).result())
+                            done.append(one.submit(fn, c).result())
                         except cf.process.BrokenProcessPool:
                             bad.append((c[0], c[1], "CRASH (worker died)"))
                         except Exception as exc:  # noqa: BLE001
@@ -150,6 +194,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fuzz", action="store_true")
     ap.add_argument("--pieces", default="auto", choices=("auto", "1"))
     ap.add_argument("--peers", action="store_true")
+    ap.add_argument("--synthetic", type=int, default=0, metavar="N",
+                    help="with --fuzz: also N seeds of every synthetic kind (cliffs, spirals, "
+                         "nested and folded holes, cylinders, random holes)")
     ap.add_argument("--workers", type=int, default=max(1, min(2, os.cpu_count() or 1)))
     ap.add_argument("--scans", nargs="+", metavar="PATH",
                     help="scan files instead of the face map and the bunnies (e.g. the "
@@ -179,10 +226,48 @@ def main(argv: list[str] | None = None) -> int:
              f"- enclosed holes: {holes:,}; left open: {len(opened)}"]
     for name, seed, why in (bad + opened)[:20]:
         lines.append(f"  - {label(name)} seed {seed}: {why}")
-    suffix = "-views" if args.scans else ""
+    suffix = "-views" if args.scans and not set(args.scans) & {"face", *BUNNIES} else ""
     if args.fuzz:
+        from asrbf_mesh.evaluate._synthetic_holes import SYNTHETIC_KINDS
+
+        traced_open = [(r["name"], r["seed"], why) for r in done
+                       for why, t in zip(r["open"], r["traced"], strict=True) if why and t]
+        lines[1] += (f" (by every part's outer border, traced through pinch vertices: "
+                     f"{sum(int(np.sum(r['traced'])) for r in done):,} enclosed, "
+                     f"{len(traced_open)} left open)")
+        others = [(n, 0, args.pieces) for n in names] + [
+            (f"synth:{k}", s, args.pieces) for k in SYNTHETIC_KINDS
+            for s in range(args.synthetic)]
+        t1 = time.perf_counter()
+        more, more_bad = run(names, [], False, args.pieces, args.workers, cases=others,
+                             fn=_other_case)
+        took += time.perf_counter() - t1
+        head = head.replace(f"({took - (time.perf_counter() - t1):.0f} s)", f"({took:.0f} s)")
+        crashes += [b for b in more_bad if b[2].startswith("CRASH")]
+        lines.append(f"- natural holes and synthetic scans: {len(others):,} cases; crashes: "
+                     f"{sum(b[2].startswith('CRASH') for b in more_bad)}; cases that raised: "
+                     f"{sum(not b[2].startswith('CRASH') for b in more_bad)}")
+        for name, seed, why in more_bad[:20]:
+            lines.append(f"  - {name} seed {seed}: {why}")
+        rows = []
+        for group in [*names, *(f"synth:{k}" for k in SYNTHETIC_KINDS)]:
+            rs = [r for r in more if r["name"] == group]
+            if not rs:
+                continue
+            why = Counter(re.sub(r"\d[\d,]*", "N", w) for r in rs for w in r["open"])
+            rows.append([f"{label(group)} (its own holes)" if group in names else group[6:],
+                         len(rs), sum(r["found"] for r in rs), sum(r["filled"] for r in rs),
+                         sum(len(r["open"]) for r in rs),
+                         "; ".join(f"{c} × {w}" for w, c in why.most_common()) or "",
+                         sum(bool(r["failed"]) for r in rs)])
         body = (f"## Hole filling: crash campaign (issue 15){' on other scans' * bool(suffix)}"
-                "\n\n" + head + "\n".join(lines) + "\n")
+                "\n\n" + head + "\n".join(lines) + "\n\n" + "Natural holes (each scan as it "
+                "is, default options) and synthetic holed scans "
+                "(`asrbf_mesh.evaluate._synthetic_holes`, default options); 'checks failed': "
+                "cases whose output had a non-finite vertex, a scan point moved, a triangle "
+                "with a vertex twice or an edge with more triangles than the scan's own "
+                "edges.\n\n" + table(["case", "runs", "holes found", "filled", "left open",
+                                      "why left open", "checks failed"], rows) + "\n")
         print(body)
         write_section("holes-fuzz" + suffix, body)
         return 1 if crashes else 0

@@ -24,42 +24,28 @@ CHILD = textwrap.dedent("""
         p = punch_protocol(am.load_scan(am.face_map_path()), seed)
         scan = p.scan
     else:
-        rng = np.random.default_rng(seed)
-        n = 40
-        x, y = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
-        if kind == "cliff":
-            z = np.where(x > n / 2 + 3 * np.sin(y / 5), 12.0, 0.0) + 0.3 * np.sin(x / 4)
-        elif kind == "spiral":
-            r, th = np.hypot(x - n / 2, y - n / 2), np.arctan2(y - n / 2, x - n / 2)
-            z = 6.0 * np.mod(th + r / 4, 2 * np.pi)
-        else:  # nested: a plateau with a ring-shaped hole around an island
-            z = 0.05 * x * y
-        pts = np.c_[x.ravel(), y.ravel(), z.ravel()]
-        j, i = np.mgrid[0:n - 1, 0:n - 1]
-        v = (j * n + i).ravel()
-        faces = np.r_[np.c_[v, v + 1, v + n + 1], np.c_[v, v + n + 1, v + n]]
-        d = np.hypot(x - n / 2, y - n / 2).ravel()
-        drop = (d < 8) & (d > 4) if kind == "nested" else d < 6 + 2 * rng.random()
-        keep = np.flatnonzero(~drop)
-        remap = np.full(len(pts), -1)
-        remap[keep] = np.arange(len(keep))
-        f = remap[faces]
-        scan = am.Scan(pts[keep], f[(f >= 0).all(axis=1)])
+        from asrbf_mesh.evaluate._synthetic_holes import synthetic_holes
+        scan = synthetic_holes(kind, seed)
     res = am.fill_holes(scan, seed=seed, progress=False)
+    def uses(F):
+        e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        return np.unique(e, axis=0, return_counts=True)[1]
     F = res.mesh.faces
-    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    _, uses = np.unique(e, axis=0, return_counts=True)
     print(json.dumps({"found": res.holes_found, "filled": res.holes_filled,
                       "reasons": [h.reason for h in res.holes if not h.filled],
                       "finite": bool(np.isfinite(res.mesh.vertices).all()),
                       "repeated": int(np.sum((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2])
                                              | (F[:, 0] == F[:, 2]))),
-                      "edge_faces": int(uses.max())}))
+                      "kept": bool(np.array_equal(res.mesh.vertices[:scan.n_points],
+                                                  scan.points)),
+                      "edge_faces": int(uses(F).max()),
+                      "scan_edge_faces": int(uses(scan.faces).max())}))
 """)
 
 
-@pytest.mark.parametrize("kind, seed", [("face", 0), ("face", 6), ("cliff", 0), ("cliff", 1),
-                                        ("spiral", 0), ("nested", 0)])
+@pytest.mark.parametrize("kind, seed", [("face", 0), ("face", 6), ("cliff", 1), ("spiral", 1),
+                                        ("nested", 0), ("fold", 0), ("fold", 2),
+                                        ("cylinder", 0), ("random", 7)])
 def test_fill_holes_never_crashes_and_reports_every_hole(kind: str, seed: int) -> None:
     proc = subprocess.run([sys.executable, "-c", CHILD, kind, str(seed)],
                           capture_output=True, text=True, timeout=300)
@@ -67,8 +53,10 @@ def test_fill_holes_never_crashes_and_reports_every_hole(kind: str, seed: int) -
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["finite"]
     assert out["found"] >= 1
-    # no triangle with a vertex twice, no edge with a third face (the scans have none)
-    assert out["repeated"] == 0 and out["edge_faces"] <= 2
+    # the scan kept; no triangle with a vertex twice, no edge with more faces than the
+    # scan's own have (a fold's wall meets its back layer on edges of three)
+    assert out["kept"] and out["repeated"] == 0
+    assert out["edge_faces"] <= max(2, out["scan_edge_faces"])
     # every hole is filled or reported with its reason
     assert len(out["reasons"]) == out["found"] - out["filled"]
     assert all(isinstance(r, str) and r for r in out["reasons"])
@@ -180,3 +168,19 @@ def test_delaunay_of_a_grid_and_of_copies() -> None:
     tris = delaunay(dup)
     assert len(tris) == 2 * 29 * 29 and tris.max() < len(xy)
     assert len(delaunay(np.c_[g, 2 * g])) == 0
+
+
+def test_synthetic_holed_scans_are_reproducible_and_holed() -> None:
+    import numpy as np
+
+    from asrbf_mesh._hole_loops import boundary_cycles
+    from asrbf_mesh.evaluate._synthetic_holes import SYNTHETIC_KINDS, synthetic_holes
+
+    for kind in SYNTHETIC_KINDS:
+        a, b = synthetic_holes(kind, 3), synthetic_holes(kind, 3)
+        assert np.array_equal(a.points, b.points) and np.array_equal(a.faces, b.faces)
+        assert not np.array_equal(a.points, synthetic_holes(kind, 4).points)
+        # the outer border and at least one more loop over seeds 0-4 (a hole, or a notch)
+        assert max(len(boundary_cycles(synthetic_holes(kind, s).faces)) for s in range(5)) >= 2
+    with pytest.raises(ValueError, match="unknown kind"):
+        synthetic_holes("donut", 0)

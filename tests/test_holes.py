@@ -352,6 +352,27 @@ def test_a_hole_whose_rim_folds_in_the_view_plane_is_closed_in_3d() -> None:
     assert point_mesh_distance(truth, res.mesh).max() < 0.6
 
 
+def test_a_loop_whose_plane_fill_gives_nothing_is_closed_through_the_disk(monkeypatch) -> None:
+    """The loop stage's first fill (in the rim's plane) may fail outright, not only be
+    refused: a folded sheet's 3-vertex gap was left open so (the rim could not be
+    triangulated in its plane). The disk fill must still be tried."""
+    from asrbf_mesh import _holes
+
+    holed, _ = cylinder_scan()
+
+    def no_plane_fill(state, job):
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), "the rim could not be triangulated"
+
+    monkeypatch.setattr(_holes, "_loop_job", no_plane_fill)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(holed, seed=0, progress=False)
+    assert all(h.filled for h in res.holes), [h.reason for h in res.holes]
+    assert len(boundary_loops(res.mesh.faces)) == 1  # only the outer border stays open
+    _, counts = edges_count(res.mesh.faces)
+    assert counts.max() == 2
+
+
 def test_a_fragment_keeps_its_border_open_while_the_hole_beside_it_is_closed() -> None:
     """Each connected part's longest boundary loop is its outer border: never capped."""
     x, y = np.meshgrid(np.arange(30.0), np.arange(30.0))
