@@ -59,6 +59,7 @@ from ._hole_close import (
     _fill_fallback,
     _fits,
     _in_sorted,
+    _Parts,
     _rim_keys,
     _rim_keys_of,
     _winds_as_hole,
@@ -280,10 +281,11 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
     from ._hole_loops import outer_loops, simple_cycles, split_loops
 
     outer, loops = split_loops(faces, len(vertices))
+    parts = _Parts(faces)  # blob or gap, where the winding cannot tell
     for border in outer:
         cut = sorted(simple_cycles(border), key=len)[:-1]  # the longest stays the border
         loops += [c for c in cut if _in_sorted(_rim_keys(c), hole_keys).any()
-                  and _winds_as_hole(vertices[c] @ R, ccw)]
+                  and (_winds_as_hole(vertices[c] @ R, ccw) or parts.is_gap(c))]
     tree = cKDTree(scan_points)
     keys, count = np.unique(_edge_keys(faces), return_counts=True)
     known = _EdgeSet(keys)  # every edge of the mesh and of the fills added so far
@@ -323,7 +325,7 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
         if not len(t) or not _fits(t, loop, known):  # refused, or no plane fill at all
             if len(np.unique(loop)) < len(loop):  # pinched: each cycle on its own
                 v, t, reason = _fill_cycles(loop, vertices, step, scan_points, tree, known,
-                                            R, ccw)
+                                            R, ccw, parts)
             else:
                 v, t, reason = _fill_fallback(loop, vertices, step, scan_points, tree, known)
         if len(t) == 0:

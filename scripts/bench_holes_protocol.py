@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as cf
+import json
 import os
 import re
 import sys
@@ -197,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--synthetic", type=int, default=0, metavar="N",
                     help="with --fuzz: also N seeds of every synthetic kind (cliffs, spirals, "
                          "nested and folded holes, cylinders, random holes)")
+    ap.add_argument("--json", metavar="PATH", help="with --fuzz: write every case's outcome")
     ap.add_argument("--workers", type=int, default=max(1, min(2, os.cpu_count() or 1)))
     ap.add_argument("--scans", nargs="+", metavar="PATH",
                     help="scan files instead of the face map and the bunnies (e.g. the "
@@ -218,9 +220,15 @@ def main(argv: list[str] | None = None) -> int:
     views = " --scans " + " ".join(args.scans) if args.scans else ""
     flags = " --poisson" * args.poisson + " --peers" * args.peers + " --fuzz" * args.fuzz + (
         f" --pieces {args.pieces}" if args.pieces != "auto" else "")
-    head = (f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; `python "
-            f"scripts/bench_holes_protocol.py --seeds {_seeds(args.seeds)}{flags}{views}` "
-            f"({took:.0f} s)._\n\n")
+    if args.synthetic:
+        flags += f" --synthetic {args.synthetic}"
+
+    def header(seconds: float) -> str:
+        return (f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; `python "
+                f"scripts/bench_holes_protocol.py --seeds {_seeds(args.seeds)}{flags}{views}` "
+                f"({seconds:.0f} s)._\n\n")
+
+    head = header(took)
     lines = [f"- cases: {len(done) + len(bad):,} ({len(names)} scans × {len(args.seeds)} seeds); "
              f"crashes: {len(crashes)}; cases that raised: {len(bad) - len(crashes)}",
              f"- enclosed holes: {holes:,}; left open: {len(opened)}"]
@@ -232,9 +240,16 @@ def main(argv: list[str] | None = None) -> int:
 
         traced_open = [(r["name"], r["seed"], why) for r in done
                        for why, t in zip(r["open"], r["traced"], strict=True) if why and t]
-        lines[1] += (f" (by every part's outer border, traced through pinch vertices: "
-                     f"{sum(int(np.sum(r['traced'])) for r in done):,} enclosed, "
-                     f"{len(traced_open)} left open)")
+        lines = lines[:1] + [
+            f"- enclosed holes, notches told by every part's outer border (traced through "
+            f"pinch vertices): {sum(int(np.sum(r['traced'])) for r in done):,}; left open: "
+            f"{len(traced_open)}"]
+        lines += [f"  - {label(n)} seed {s}: {why}" for n, s, why in (bad + traced_open)[:20]]
+        lines.append(f"- enclosed holes by libigl's longest boundary loop (the issue's "
+                     f"protocol): {holes:,}; left open: {len(opened)}, "
+                     f"{len(opened) - len(traced_open)} of them bites out of a part's outer "
+                     f"border (a fragment's, or the border beyond a pinch vertex), which the "
+                     f"fill leaves open as it leaves the border")
         others = [(n, 0, args.pieces) for n in names] + [
             (f"synth:{k}", s, args.pieces) for k in SYNTHETIC_KINDS
             for s in range(args.synthetic)]
@@ -242,7 +257,11 @@ def main(argv: list[str] | None = None) -> int:
         more, more_bad = run(names, [], False, args.pieces, args.workers, cases=others,
                              fn=_other_case)
         took += time.perf_counter() - t1
-        head = head.replace(f"({took - (time.perf_counter() - t1):.0f} s)", f"({took:.0f} s)")
+        head = header(took)
+        if args.json:
+            Path(args.json).write_text(json.dumps(
+                [{k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in r.items()}
+                 for r in done + more], default=str))
         crashes += [b for b in more_bad if b[2].startswith("CRASH")]
         lines.append(f"- natural holes and synthetic scans: {len(others):,} cases; crashes: "
                      f"{sum(b[2].startswith('CRASH') for b in more_bad)}; cases that raised: "

@@ -890,3 +890,21 @@ def test_a_hole_across_a_cliff_is_filled_on_each_side() -> None:
     assert len(left) > 20 and len(right) > 20
     assert np.abs(left[:, 2]).max() < 0.05  # each side continues its own terrace
     assert np.abs(right[:, 2] - 8).max() < 0.05
+
+
+def test_parts_tell_a_gap_from_a_blob_whatever_the_winding() -> None:
+    """A small boundary cycle is a gap when the triangles on its edges have more border
+    elsewhere: a missing triangle seen nearly edge-on winds either way (desk2 kept one
+    open), while a triangle pinched to the mesh at one vertex is a blob."""
+    from asrbf_mesh._hole_close import _Parts
+
+    faces = grid_faces(6, 6)
+    gap = faces[20]  # an inner triangle, taken out: its three edges bound a gap
+    pinched = np.array([[35, 36, 37]])  # a triangle on the grid's last corner vertex only
+    mesh_faces = np.vstack([np.delete(faces, 20, axis=0), pinched])
+    parts = _Parts(mesh_faces)
+    assert parts.is_gap(gap)
+    assert not parts.is_gap(pinched[0])
+    # a larger cycle is left to its winding
+    ring = np.array([0, 1, 2, 3, 4, 5, 11, 17, 23, 29])
+    assert not parts.is_gap(ring)
