@@ -201,7 +201,7 @@ class _Parts:
         a, b = order[same] % n, order[same + 1] % n
         _, comp = connected_components(
             sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)), directed=False)
-        uniq, first, count = np.unique(k, return_index=True, return_counts=True)
+        _, first, count = np.unique(k, return_index=True, return_counts=True)
         border_face = order[first[count == 1]] % n
         self._keys, self._order, self._comp = k, order, comp
         self._border = np.bincount(comp[border_face], minlength=int(comp.max()) + 1)
@@ -220,8 +220,9 @@ class _Parts:
             return False
         if self._comp is None:
             self._build()
-        pos = np.searchsorted(self._keys, _rim_keys(cycle))
-        pos = pos[(pos < len(self._keys))]
+        rim = _rim_keys(cycle)
+        pos = np.minimum(np.searchsorted(self._keys, rim), len(self._keys) - 1)
+        pos = pos[self._keys[pos] == rim]  # the cycle's edges that are the mesh's
         if len(pos) == 0:
             return False
         parts = np.unique(self._comp[self._order[pos] % len(self.faces)])
