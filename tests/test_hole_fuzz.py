@@ -54,7 +54,7 @@ def test_fill_holes_never_crashes_and_reports_every_hole(kind: str, seed: int) -
     assert out["finite"]
     assert out["found"] >= 1
     # the scan kept; no triangle with a vertex twice, no edge with more faces than the
-    # scan's own have (a fold's wall meets its back layer on edges of three)
+    # scan's own edges have (2 on these scans; a non-manifold scan may have more)
     assert out["kept"] and out["repeated"] == 0
     assert out["edge_faces"] <= max(2, out["scan_edge_faces"])
     # every hole is filled or reported with its reason

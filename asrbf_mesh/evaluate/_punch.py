@@ -87,12 +87,21 @@ def punch_holes(scan: Scan, *, count: int = 5, radius_rel: tuple[float, float] =
     rad = np.array(radii)
     d = np.linalg.norm(xy[:, None, :] - cen[None], axis=2)
     removed = (d <= rad[None]).any(axis=1)
-    keep = np.flatnonzero(~removed)
-    remap = np.full(len(xy), -1, dtype=np.int64)
-    remap[keep] = np.arange(len(keep))
-    faces = None
-    if scan.faces is not None:
-        f = remap[scan.faces]
-        faces = f[(f >= 0).all(axis=1)]
-    holed = Scan(scan.points[keep], faces, source=scan.source, grid_shape=None)
+    points, faces = remove_points(scan.points, scan.faces, removed)
+    holed = Scan(points, faces, source=scan.source, grid_shape=None)
     return PunchedScan(holed, scan.points[removed].copy(), cen, rad)
+
+
+def remove_points(points: np.ndarray, faces: np.ndarray | None, drop: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Remove the points ``drop`` (bool mask) and the faces that touch them.
+
+    Returns the points kept and the faces left, renumbered onto them (None stays None).
+    """
+    keep = np.flatnonzero(~drop)
+    remap = np.full(len(points), -1, dtype=np.int64)
+    remap[keep] = np.arange(len(keep))
+    if faces is None:
+        return points[keep], None
+    f = remap[faces]
+    return points[keep], f[(f >= 0).all(axis=1)]

@@ -42,6 +42,7 @@ from .._igl import boundary_loops, point_mesh_distance
 from .._mesh import Mesh, Scan
 from .._validate import check_choice, check_seed
 from ..errors import ScanError
+from ._punch import remove_points
 
 __all__ = ["PunchedHoles", "punch_protocol", "score_holes", "DISKS", "MAX_TRIES"]
 
@@ -135,11 +136,7 @@ def punch_protocol(scan: Scan, seed: int = 0, border: str = "igl") -> PunchedHol
     removed = np.zeros(len(xy), dtype=bool)
     for c, r in zip(cen, rad, strict=True):
         removed[tree.query_ball_point(c, r)] = True
-    keep = np.flatnonzero(~removed)
-    remap = np.full(len(xy), -1, dtype=np.int64)
-    remap[keep] = np.arange(len(keep))
-    f = remap[base.faces]
-    punched = Scan(pts[keep], f[(f >= 0).all(axis=1)], source=scan.source)
+    punched = Scan(*remove_points(pts, base.faces, removed), source=scan.source)
     truth = pts[removed]
     hole, enclosed = _holes(truth, punched, xy, base.bbox_diagonal, border)
     return PunchedHoles(punched, truth, hole, enclosed, cen, rad, base.bbox_diagonal)

@@ -15,6 +15,7 @@ import numpy as np
 from .._igl import orient_faces
 from .._mesh import Scan
 from .._surface import grid_faces
+from ._punch import remove_points
 
 __all__ = ["SYNTHETIC_KINDS", "synthetic_holes"]
 
@@ -61,11 +62,7 @@ def synthetic_holes(kind: str, seed: int) -> Scan:
 
 def _cut(pts: np.ndarray, faces: np.ndarray, drop: np.ndarray) -> Scan:
     """Return the scan without the points ``drop`` and the faces touching them."""
-    keep = np.flatnonzero(~drop)
-    remap = np.full(len(pts), -1)
-    remap[keep] = np.arange(len(keep))
-    f = remap[faces]
-    return Scan(pts[keep], f[(f >= 0).all(axis=1)])
+    return Scan(*remove_points(pts, faces, drop))
 
 
 def _fold(rng: np.random.Generator) -> Scan:
