@@ -210,6 +210,10 @@ def fill_loop(loop: np.ndarray, points: np.ndarray, spacing: float,
     return new, _oriented(out, loop), None
 
 
+#: At most about this many interior vertices in a disk fill (:func:`_fill_by_disk`).
+_DISK_SAMPLES = 20_000
+
+
 def _fill_by_disk(loop: np.ndarray, rim: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, str | None]:
     """Fill a loop through a disk: rim on a circle by arc length, interior by fairing."""
@@ -224,7 +228,11 @@ def _fill_by_disk(loop: np.ndarray, rim: np.ndarray
     radius = length / (2 * np.pi)
     angle = 2 * np.pi * arc / length
     q = radius * np.column_stack([np.cos(angle), np.sin(angle)])
-    h = float(np.median(edge))
+    # interior samples at the rim's median edge, but at most about _DISK_SAMPLES of
+    # them: a loop with one edge hundreds of times its median (37 vertices, a rim
+    # 3,700 median edges long) asked for 630,000 and kept libigl's fairing busy for
+    # minutes on gigabytes
+    h = max(float(np.median(edge)), length / np.sqrt(4.0 * np.pi * _DISK_SAMPLES))
     seg = np.column_stack([np.arange(n), np.roll(np.arange(n), -1)])
     try:
         tris, extra = triangulate(q, seg, "pYQ")

@@ -75,3 +75,44 @@ def test_fill_holes_on_forked_processes_gives_the_same_bytes(monkeypatch) -> Non
     assert np.array_equal(here.mesh.vertices, forked.mesh.vertices)
     assert np.array_equal(here.mesh.faces, forked.mesh.faces)
     assert here.to_dict()["holes"] == forked.to_dict()["holes"]
+
+
+def test_workers_end_with_a_killed_parent(tmp_path) -> None:
+    """A parent killed mid-job (``timeout``, SIGKILL) left its forked workers running:
+    one went on filling a hole for minutes on gigabytes. They now end with it."""
+    import signal
+    import subprocess
+    import sys
+    import textwrap
+    import time
+
+    pids = tmp_path / "pids"
+    code = textwrap.dedent(f"""
+        import os, time
+        from asrbf_mesh import _forked
+        _forked.workers_available = lambda: 2
+        def job(state, item):
+            with open({str(pids)!r}, "a") as f:
+                f.write(f"{{os.getpid()}}\\n")
+            time.sleep(60)
+            return item
+        _forked.map_forked(job, None, list(range(16)))
+    """)
+    parent = subprocess.Popen([sys.executable, "-c", code])
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and (
+                not pids.exists() or len(set(pids.read_text().split())) < 2):
+            time.sleep(0.1)
+        workers = {int(p) for p in pids.read_text().split()}
+        assert len(workers) == 2 and parent.pid not in workers
+    finally:
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+    deadline = time.monotonic() + 10
+    alive = workers
+    while alive and time.monotonic() < deadline:
+        alive = {p for p in alive if os.path.exists(f"/proc/{p}")
+                 and open(f"/proc/{p}/stat").read().split()[2] != "Z"}
+        time.sleep(0.1)
+    assert not alive

@@ -908,3 +908,21 @@ def test_parts_tell_a_gap_from_a_blob_whatever_the_winding() -> None:
     # a larger cycle is left to its winding
     ring = np.array([0, 1, 2, 3, 4, 5, 11, 17, 23, 29])
     assert not parts.is_gap(ring)
+
+
+def test_a_disk_fill_keeps_its_interior_small_whatever_the_rim() -> None:
+    """A loop with one rim edge hundreds of times its median asked the disk fill for
+    ~630,000 interior vertices (a 37-vertex rim 3,700 median edges long): libigl's
+    fairing then ran for minutes on gigabytes. The interior is capped."""
+    from asrbf_mesh._hole_loops import _DISK_SAMPLES, _fill_by_disk
+
+    # 36 points 0.01 apart on a short arc, then one far away: the closing edges are long
+    t = np.linspace(0.0, 0.35, 36)
+    rim = np.column_stack([np.cos(t), np.sin(t), np.zeros_like(t)])
+    rim = np.vstack([rim, [[-15.0, 8.0, 0.5]]])
+    loop = np.arange(len(rim))
+    new, tris, why = _fill_by_disk(loop, rim)
+    assert why is None, why
+    assert 0 < len(new) <= 1.2 * _DISK_SAMPLES
+    assert np.all(np.isfinite(new))
+    assert set(np.unique(tris[tris >= 0])) <= set(loop.tolist())
