@@ -288,14 +288,16 @@ def _edt(mask):
     return np.sqrt(d2)
 
 
-def thin_plate(centres: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, ...] | None:
-    """Interpolating thin-plate spline in 2D with a linear term: its coefficients, or None.
+def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0
+               ) -> tuple[np.ndarray, ...] | None:
+    """Thin-plate spline in 2D with a linear term: its coefficients, or None.
 
     ``s(x) = sum_j w_j phi(|x - y_j|) + a_0 + a . (x - shift) / scale``, ``phi(r) = r^2
     log r``, the polynomial on the centres' box mapped to [-1, 1] (as scipy's
-    ``RBFInterpolator`` does). Returns (centres, w, a, shift, scale) for
-    :func:`ray_depths`, None when the centres are fewer than 3 or on one line, or the
-    system is singular (points repeated).
+    ``RBFInterpolator`` does); interpolating, or with ``smoothing`` added to the kernel
+    matrix's diagonal (scipy's ``smoothing``) a smoothing spline. Returns (centres, w, a,
+    shift, scale) for :func:`ray_depths`, None when the centres are fewer than 3 or on
+    one line, or the system is singular (points repeated).
     """
     y = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 2)
     d = np.ascontiguousarray(values, dtype=np.float64).ravel()
@@ -311,6 +313,8 @@ def thin_plate(centres: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, ...
         return None
     A = np.zeros((n + 3, n + 3))
     A[:n, :n] = _tps_gram(y)
+    if smoothing > 0.0:
+        A[np.arange(n), np.arange(n)] += smoothing
     A[:n, n:] = P
     A[n:, :n] = P.T
     # scipy's LAPACK, as its RBFInterpolator does (numpy's solve: two fills side by side,

@@ -72,3 +72,26 @@ def test_thin_plate_matches_scipy_and_rays_meet_it() -> None:
     # too few points, all on a line: no spline
     assert hk.thin_plate(uv[:2], h[:2]) is None
     assert hk.thin_plate(np.column_stack([uv[:, 0], uv[:, 0]]), h) is None
+    # smoothing: scipy's smoothing spline, which no longer passes through the data
+    smooth = hk.thin_plate(uv, h, 1e-3)
+    ref = RBFInterpolator(uv, h, kernel="thin_plate_spline", smoothing=1e-3)
+    flat = hk.ray_depths(q, np.zeros(3), np.eye(3)[:2], np.eye(3)[2], 1.0, smooth, 1e-12, 1e-6)
+    assert np.abs(flat - ref(q)).max() < 1e-9
+    at = hk.ray_depths(uv, np.zeros(3), np.eye(3)[:2], np.eye(3)[2], 1.0, smooth, 1e-12, 1e-6)
+    assert np.abs(at - h).max() > 1e-6
+
+
+def test_a_rings_noise_is_measured_and_a_smooth_ring_has_none() -> None:
+    """The fill's thin plate smooths by the ring's noise (``_hole_patch._ring_noise``):
+    the variance of heights about local quadratic fits, near the true one for Gaussian
+    noise on a curved surface, near zero without noise."""
+    from asrbf_mesh._hole_patch import _ring_noise
+
+    rng = np.random.default_rng(4)
+    uv = rng.uniform(-1, 1, (1200, 2))
+    surface = 0.3 * uv[:, 0] ** 2 - 0.2 * uv[:, 0] * uv[:, 1] + 0.1 * np.sin(2 * uv[:, 1])
+    assert _ring_noise(uv, surface) < 1e-8
+    for sigma in (1e-3, 1e-2):
+        got = _ring_noise(uv, surface + rng.normal(0.0, sigma, len(uv)))
+        assert 0.7 < np.sqrt(got) / sigma < 1.3, (sigma, np.sqrt(got))
+    assert _ring_noise(uv[:20], surface[:20]) == 0.0  # too few to tell
