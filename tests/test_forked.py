@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -77,6 +78,14 @@ def test_fill_holes_on_forked_processes_gives_the_same_bytes(monkeypatch) -> Non
     assert here.to_dict()["holes"] == forked.to_dict()["holes"]
 
 
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie (Linux's /proc)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    except OSError:
+        return False
+
+
 def test_workers_end_with_a_killed_parent(tmp_path) -> None:
     """A parent killed mid-job (``timeout``, SIGKILL) left its forked workers running:
     one went on filling a hole for minutes on gigabytes. They now end with it."""
@@ -112,7 +121,6 @@ def test_workers_end_with_a_killed_parent(tmp_path) -> None:
     deadline = time.monotonic() + 10
     alive = workers
     while alive and time.monotonic() < deadline:
-        alive = {p for p in alive if os.path.exists(f"/proc/{p}")
-                 and open(f"/proc/{p}/stat").read().split()[2] != "Z"}
+        alive = {p for p in alive if _running(p)}
         time.sleep(0.1)
     assert not alive
