@@ -258,10 +258,12 @@ def main(argv: list[str] | None = None) -> int:
                              fn=_other_case)
         took += time.perf_counter() - t1
         head = header(took)
-        if args.json:
+        if args.json:  # every case: its outcome, or how it failed (a crash, an exception)
             Path(args.json).write_text(json.dumps(
                 [{k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in r.items()}
-                 for r in done + more], default=str))
+                 for r in done + more]
+                + [{"name": n, "seed": s, "error": why} for n, s, why in bad + more_bad],
+                default=str))
         crashes += [b for b in more_bad if b[2].startswith("CRASH")]
         lines.append(f"- natural holes and synthetic scans: {len(others):,} cases; crashes: "
                      f"{sum(b[2].startswith('CRASH') for b in more_bad)}; cases that raised: "
