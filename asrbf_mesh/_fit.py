@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from . import _config
+from ._blas import one_blas_thread
 from ._config import LOCAL_WIDTH, FitConfig
 from ._frame import HeightField, to_height_field
 from ._io import Scan
@@ -118,6 +119,18 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
     if isinstance(pieces, Segmentation) and pieces.n_points != len(points):
         raise ConfigError(f"pieces: the segmentation has {pieces.n_points:,} points, the scan "
                           f"{len(points):,}")
+    # BLAS on one thread for the whole fit: its threads spin after each call, on the
+    # cores the numba kernels want (:mod:`._blas`)
+    with one_blas_thread():
+        return _fit_checked(points, source, faces, named, cfg, seed, view_axis, pieces,
+                            progress, order)
+
+
+def _fit_checked(points: np.ndarray, source: str | None, faces: np.ndarray | None,
+                 named: str, cfg: FitConfig, seed: int, view_axis: str,
+                 pieces: str | Segmentation, progress: bool | None,
+                 order: Callable[[np.random.Generator], np.ndarray] | None) -> Network:
+    """Fit checked arguments (the body of :func:`fit`)."""
     t0 = (time.perf_counter(), compile_seconds())
     # the cut into pieces runs beside the search for isolated points, the frame and the
     # sampling measures (mostly KD-tree queries and compiled kernels that release the
@@ -131,7 +144,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
         fitted = points
         if n_stray:  # stray returns would set the frame and pull the surface: leave them out
             warnings.warn(describe_isolated(points, stray, named), OutlierWarning,
-                          stacklevel=2)
+                          stacklevel=3)
             fitted = points[~stray]
             if len(fitted) < MIN_POINTS:
                 raise ScanError(f"{named}a fit needs at least {MIN_POINTS} points that are "
@@ -147,7 +160,7 @@ def fit(scan: Scan | np.ndarray, config: FitConfig | None = None, *, seed: int =
         seg = cut.result()
     if seg is not None and order is not None:
         raise ConfigError("order applies to a single network: pass pieces=1")
-    polish = polish_kind(hf.fold, cfg.polish)
+    polish = polish_kind(hf.fold, cfg.polish, stacklevel=4)
     common = (source, source_hash(points), int(seed), n_stray or None)
     if seg is None or seg.n_pieces == 1 or (pieces == "auto" and _scattered(seg)):
         # the paper's single network (pieces=1) is learned and polished as it was; the

@@ -20,13 +20,25 @@ On the scans shipped and benchmarked here (the face map, the four Stanford bunny
 the bunny crop) the farthest real point reaches at most 0.46 of the threshold (bun090, in
 3D; 0.17 in the view plane), so the rule flags no point of a real scan and a clean scan
 fits exactly as before.
+
+Most points never need their neighbours measured: a point with ``k`` others within the
+threshold is not isolated, and when more than half of the points have ``k`` others within
+the threshold / ``DENSITY_FACTOR``, the median cannot raise the threshold. Both are
+counted on grids of cells as wide as those radii (a compiled kernel, own cell first,
+stopping at the ``k``-th); only the points left in doubt (none on a real scan) and
+scans that fail the median test (sparse ones) go to the k-d tree. The same answers as
+the k-d tree over every point (tests); on the face map 19 ms instead of 100.
 """
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
+from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
 from ._validate import check_float, check_int, plural
 
 __all__ = ["OutlierWarning", "isolated_points", "describe_isolated",
@@ -94,10 +106,98 @@ def isolated_points(points: np.ndarray, *, neighbours: int = NEIGHBOURS,
         return np.zeros(n, dtype=bool)
     lo, ext = robust_box(p)
     u = (p - lo) / ext  # each axis in units of its robust extent, as the frame does
-    diag = float(np.sqrt(u.shape[1]))
+    bound = rel * float(np.sqrt(u.shape[1]))  # of the robust box's diagonal
+    # the threshold is max(bound, DENSITY_FACTOR x the median k-th distance): when more
+    # than half of the points have k others in their cell of a grid fine enough that a
+    # cell's diagonal is under bound / DENSITY_FACTOR, the median cannot raise it, and a
+    # point with k others in its cell of a grid whose cell diagonal is under the bound
+    # is not isolated. Only the others need their neighbours (none on a real scan)
+    fine = _crowded(u, bound / DENSITY_FACTOR, k)
+    if 2 * int(fine.sum()) > n:
+        doubt = np.flatnonzero(~fine)
+        doubt = doubt[~_crowded(u, bound, k, doubt)]
+        out = np.zeros(n, dtype=bool)
+        if len(doubt):
+            dist, _ = cKDTree(u).query(u[doubt], k=k + 1, workers=workers)
+            out[doubt] = dist[:, -1] > bound
+        return out
     dist, _ = cKDTree(u).query(u, k=k + 1, workers=workers)
     dk = dist[:, -1]
-    return dk > max(rel * diag, DENSITY_FACTOR * float(np.median(dk)))
+    return dk > max(bound, DENSITY_FACTOR * float(np.median(dk)))
+
+
+#: Cell coordinates beyond this (in cells, either sign) are not binned: such a point is
+#: judged by its neighbours through the k-d tree (:func:`_crowded` says False for it).
+_CELL_RANGE = 1 << 19
+
+
+def _crowded(u: np.ndarray, radius: float, k: int, at: np.ndarray | None = None
+             ) -> np.ndarray:
+    """Whether points have ``k`` others within 0.999 x ``radius`` (Euclidean).
+
+    For every point, or for the points ``at`` (then one answer each). Through a grid of
+    cells as wide as that radius (a neighbour that near is in one of the 3^d cells
+    around), own cell first, stopping at the ``k``-th: on a scan, a few distances per
+    point. The 0.1 % keeps the answer clear of the k-d tree's rounding. Points farther
+    than :data:`_CELL_RANGE` cells from the origin are not binned (nor found as
+    neighbours): False, which only sends points to the exact search.
+    """
+    n, d = u.shape
+    at = np.arange(n) if at is None else np.asarray(at, dtype=np.int64)
+    r = 0.999 * radius
+    if not r > 0 or d > 3:
+        return np.zeros(len(at), dtype=bool)
+    offsets = np.array(list(itertools.product((0, -1, 1), repeat=d)), dtype=np.int64)
+    strides = (2 * _CELL_RANGE) ** np.arange(d - 1, -1, -1, dtype=np.int64)
+    return _near_enough(np.ascontiguousarray(u, np.float64), at, r, k, offsets @ strides,
+                        _CELL_RANGE)
+
+
+@njit(cache=True, nogil=True)
+def _near_enough(u, at, r, k, steps, span):
+    """Count neighbours within ``r`` of the points ``at``, up to ``k`` (:func:`_crowded`).
+
+    ``steps`` are the key offsets of the cells around a cell (its own first) for keys of
+    ``2 span`` values per axis.
+    """
+    n, d = u.shape
+    key = np.zeros(n, dtype=np.int64)
+    inside = np.ones(n, dtype=np.bool_)
+    for i in range(n):
+        for a in range(d):
+            c = np.floor(u[i, a] / r)
+            if not abs(c) < span - 1:  # NaN included
+                inside[i] = False
+                key[i] = 0
+                break
+            key[i] = key[i] * (2 * span) + np.int64(c) + span
+    order = np.argsort(key)  # (any order within a cell gives the same answer)
+    sorted_keys = key[order]
+    r2 = r * r
+    out = np.zeros(len(at), dtype=np.bool_)
+    for q in range(len(at)):
+        i = at[q]
+        if not inside[i]:
+            continue
+        found = 0
+        for s in steps:
+            want = key[i] + s
+            t = np.searchsorted(sorted_keys, want)
+            while t < n and sorted_keys[t] == want and found < k:
+                j = order[t]
+                t += 1
+                if j == i or not inside[j]:
+                    continue
+                dist2 = 0.0
+                for a in range(d):
+                    diff = u[i, a] - u[j, a]
+                    dist2 += diff * diff
+                if dist2 <= r2:
+                    found += 1
+            if found >= k:
+                break
+        out[q] = found >= k
+    return out
 
 
 def describe_isolated(points: np.ndarray, mask: np.ndarray, name: str = "") -> str:

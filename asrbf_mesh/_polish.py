@@ -16,9 +16,6 @@ and over holes -- where learning left them instead of letting them explode.
 
 from __future__ import annotations
 
-import contextlib
-import functools
-import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
@@ -27,6 +24,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import cg, spsolve
 
 from . import _network_kernels as _nk
+from ._blas import one_blas_thread
 from ._piece import _read_only, eval_grid, eval_unit
 
 __all__ = ["PolishResult", "polish_weights", "polish_weights_blocks", "polish_full",
@@ -370,7 +368,7 @@ def _solve_spd(mat: sp.spmatrix | np.ndarray, rhs: np.ndarray) -> np.ndarray:
     n = mat.shape[0]
     if n <= DENSE_MAX:
         # one BLAS thread: see drop_idle
-        with _one_blas_thread():
+        with one_blas_thread():
             chol, info = sla.lapack.dpotrf(_dense(mat), lower=1)
             if info == 0:
                 x, info = sla.lapack.dpotrs(chol, np.asarray(rhs, np.float64), lower=1)
@@ -472,26 +470,6 @@ def polish_full(xy: np.ndarray, z: np.ndarray, a0: float, centers: np.ndarray,
 IDLE_MAX_NEURONS = DENSE_MAX - 1
 
 
-#: Held while BLAS is limited to one thread: the limit is process-wide, and two pieces
-#: polished on two threads would otherwise restore each other's limits out of order.
-_BLAS_LOCK = threading.Lock()
-
-
-@contextlib.contextmanager
-def _one_blas_thread():
-    """Run the block with BLAS on one thread (one block at a time in the process)."""
-    with _BLAS_LOCK, _blas_controller().limit(limits=1, user_api="blas"):
-        yield
-
-
-@functools.cache
-def _blas_controller():
-    """Return the process's BLAS libraries, inspected once (an inspection costs 1-2 ms)."""
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
-
-
 def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
                    atz: np.ndarray, a0: float, centers: np.ndarray, widths: np.ndarray,
                    weights: np.ndarray, support: float, ridge: float, limit: float, *,
@@ -527,8 +505,8 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     w = np.concatenate([[a0], weights])
     # one BLAS thread: worker threads left spinning after a threaded factorization
     # took the cores from the numba kernels that follow it (the piecewise fit of
-    # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without)
-    with _one_blas_thread():
+    # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without; :mod:`._blas`)
+    with one_blas_thread():
         chol, info = sla.lapack.dpotrf(_ridged(ata, ridge), lower=1)
         if info == 0:
             step, info = sla.lapack.dpotrs(chol, atz - ata @ w, lower=1)

@@ -120,3 +120,46 @@ def test_a_streamed_fit_warns_about_far_points(tmp_path: Path) -> None:
     np.save(tmp_path / "stray.npy", pts)
     with pytest.warns(am.OutlierWarning, match=r"a few points lie far from the rest.*x axis"):
         am.fit_stream(tmp_path / "stray.npy", seed=0, chunk=8192, progress=False)
+
+
+def _isolated_by_the_rule(points: np.ndarray, k: int = 3) -> np.ndarray:
+    """The rule itself, every point's k-th neighbour from a k-d tree (the reference)."""
+    from scipy.spatial import cKDTree
+
+    from asrbf_mesh._outliers import DENSITY_FACTOR, robust_box
+
+    lo, ext = robust_box(points)
+    u = (points - lo) / ext
+    dk = cKDTree(u).query(u, k=k + 1)[0][:, -1]
+    return dk > max(DISTANCE_REL * np.sqrt(points.shape[1]), DENSITY_FACTOR * np.median(dk))
+
+
+def _point_sets() -> list[np.ndarray]:
+    rng = np.random.default_rng(7)
+    sets = [surface(), am.load_scan(DATA / "bun000_crop.ply").points]
+    for seed in range(12):
+        r = np.random.default_rng(seed)
+        n = int(r.integers(5, 4000))
+        pts = r.random((n, 3)) * r.uniform(0.01, 100.0, 3)
+        kind = seed % 4
+        if kind == 1:  # strays, some in groups, some astronomically far
+            far = r.choice(n, size=min(n, 7), replace=False)
+            pts[far] += r.normal(0, 1, (len(far), 3)) * 10.0 ** r.integers(1, 12, (len(far), 1))
+        elif kind == 2:  # clusters and duplicates
+            pts[: n // 2] = pts[r.integers(0, 5, n // 2)]
+        elif kind == 3:  # a sparse cloud: the median rule decides
+            pts = r.random((int(r.integers(5, 60)), 3))
+        sets.append(pts)
+    sets.append(rng.random((500, 2)))  # the footprint's 2D points
+    xy = rng.random((3000, 2))
+    xy[:4] = [5.0, 5.0]  # four copies of one stray: neighbours of one another
+    sets.append(xy)
+    grid = surface(30)
+    grid[100] = [1e300, 0.0, 0.0]  # beyond any grid cell
+    sets.append(grid)
+    return sets
+
+
+def test_the_grid_shortcut_gives_the_rules_answer_on_every_set() -> None:
+    for pts in _point_sets():
+        assert np.array_equal(isolated_points(pts), _isolated_by_the_rule(pts))

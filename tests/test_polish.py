@@ -451,3 +451,76 @@ def test_drop_idle_keeps_the_network_without_normal_equations(learned) -> None:
     pr = polish_full(hf.xy, hf.z, st.a0, st.centers, st.widths, st.weights, 3.5,
                      iterations=1)
     assert drop_idle(hf.xy, hf.z, pr, 3.5, 1e-4, 1.0) == (pr, 0)
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_one_blas_thread_restores_the_limit_once_the_last_holder_leaves(monkeypatch) -> None:
+    """Two threads hold the limit, the first to enter leaves first: one limit, one restore.
+
+    (threadpoolctl's calls are faked: OpenBLAS itself sometimes ignores a thread count
+    raised from a thread other than the one that lowered it, which is not under test.)
+    """
+    import threading
+
+    from asrbf_mesh import _blas
+
+    calls: list[str] = []
+
+    class Limiter:
+        def restore_original_limits(self) -> None:
+            calls.append("restore")
+
+    class Controller:
+        def limit(self, *, limits: int, user_api: str) -> Limiter:
+            calls.append(f"limit {limits} {user_api}")
+            return Limiter()
+
+    monkeypatch.setattr(_blas, "_controller", lambda: Controller())
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+    seen: list[list[str]] = []
+
+    def first() -> None:
+        with _blas.one_blas_thread():
+            first_in.set()
+            second_in.wait(10)
+        first_out.set()
+
+    def second() -> None:
+        first_in.wait(10)
+        with _blas.one_blas_thread():
+            second_in.set()
+            first_out.wait(10)
+            seen.append(list(calls))  # the first left: nothing restored yet
+
+    threads = [threading.Thread(target=first), threading.Thread(target=second)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(20)
+    assert seen == [["limit 1 blas"]]
+    assert calls == ["limit 1 blas", "restore"]
+    assert _blas._STATE == {"depth": 0, "limiter": None}
+
+
+def test_a_fit_runs_blas_on_one_thread_and_gives_it_back(monkeypatch) -> None:
+    from asrbf_mesh import _polish
+
+    seen: list[list[int]] = []
+    solve = _polish._solve_spd
+
+    def spy(*args, **kwargs):
+        seen.append(_blas_threads())
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(_polish, "_solve_spd", spy)
+    before = _blas_threads()
+    rng = np.random.default_rng(0)
+    xy = rng.random((3000, 2))
+    am.fit(np.c_[xy, np.sin(3 * xy[:, 0])], seed=0, progress=False)
+    assert seen and all(set(s) <= {1} for s in seen)
+    assert _blas_threads() == before
