@@ -524,3 +524,37 @@ def test_a_fit_runs_blas_on_one_thread_and_gives_it_back(monkeypatch) -> None:
     am.fit(np.c_[xy, np.sin(3 * xy[:, 0])], seed=0, progress=False)
     assert seen and all(set(s) <= {1} for s in seen)
     assert _blas_threads() == before
+
+
+def test_tiled_solve_and_drop_keeps_its_share_of_the_gain(learned, monkeypatch) -> None:
+    """By strips (block Gauss-Seidel, drops strip by strip): near the whole solve."""
+    from asrbf_mesh import _polish
+    from asrbf_mesh._polish import extend_normal, solve_and_drop
+
+    hf, st, first, weights = _appended(learned, 8)
+    ata, atz = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    base = np.r_[first.a0, first.weights, np.zeros(8)]
+    args = (hf.xy, hf.z, ata, atz, first.a0, st.centers, st.widths, weights, 3.5, 1e-4)
+
+    def sum_squares(pr) -> float:
+        A = design_matrix(hf.xy, pr.centers, pr.widths, pr.weights, 3.5)
+        return float(((A @ np.r_[pr.a0, pr.weights] - hf.z) ** 2).sum())
+
+    whole, _ = solve_and_drop(*args, 0.0)
+    whole_drop, n_whole = solve_and_drop(*args, np.inf, base=base, give_back=0.5)
+    k = len(st.widths)
+    monkeypatch.setattr(_polish, "TILE_ABOVE", k // 4)
+    monkeypatch.setattr(_polish, "TILE_NEURONS", k // 4)  # four or five strips
+    tiled, none = solve_and_drop(*args, 0.0)
+    got, n = solve_and_drop(*args, np.inf, base=base, give_back=0.5)
+    before, best, swept = sum_squares(first), sum_squares(whole), sum_squares(tiled)
+    assert none == 0 and 0 < n < k
+    # two sweeps come within a few percent of the whole solve's gain
+    assert best <= swept * (1 + 1e-9) and swept - best < 0.05 * (before - best)
+    # the drops give back at most half of the sweeps' gain
+    after = sum_squares(got)
+    assert swept < after <= swept + 0.5 * (before - swept) * (1 + 1e-6)
+    # priced with fewer weights free, the strips drop no more here than the whole solve
+    assert n <= n_whole
+    assert got.ebar_after == pytest.approx(mean_abs(hf.xy, hf.z, got.a0, got.centers,
+                                                    got.widths, got.weights))
