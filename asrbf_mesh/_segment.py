@@ -74,6 +74,7 @@ piece: on the face map, shorter ones split off slivers that cost neurons and no 
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -511,24 +512,48 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     labels = labels.copy()
     n_split = 0
     todo = list(np.unique(labels[jumps[:, 0]]))
-    for _ in range(_SPLIT_ROUNDS):
-        nxt = []
-        for piece in todo:
-            inner = jumps[(labels[jumps[:, 0]] == piece) & (labels[jumps[:, 1]] == piece)]
-            if len(inner) < _MIN_CLIFF_PAIRS:
-                continue
-            own = np.flatnonzero(labels == piece)
-            side = _wrapped_side(local, own, graph, labels, anchor,
-                                 _largest_cliff(local[:, :2], inner, radius))
-            if side is not None:
-                new = int(labels.max()) + 1
-                labels[own[side]] = new
-                n_split += 1
-                nxt += [piece, new]
-        if not nxt:
-            break
-        todo = nxt
+
+    def sides(own: np.ndarray, inner: np.ndarray) -> np.ndarray | None:
+        if len(inner) < _MIN_CLIFF_PAIRS:
+            return None
+        return _wrapped_side(local, own, graph, labels, anchor,
+                             _largest_cliff(local[:, :2], inner, radius))
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        for _ in range(_SPLIT_ROUNDS):
+            # each piece's points and its jump pairs inside it, in index order (stable sorts)
+            points = _members(labels, todo)
+            first = labels[jumps[:, 0]]
+            within = np.flatnonzero(first == labels[jumps[:, 1]])
+            pairs = {p: jumps[k] for p, k in _members(first[within], todo, within).items()}
+            # the pieces of a round are apart (a search stays in its piece): their searches
+            # run two at a time, the largest first; the splits then go in the round's order
+            order = sorted(todo, key=lambda p: -len(pairs[p]))
+            found = dict(zip(order, pool.map(sides, [points[p] for p in order],
+                                             [pairs[p] for p in order]), strict=True))
+            nxt = []
+            for piece in todo:
+                own, side = points[piece], found[piece]
+                if side is not None:
+                    new = int(labels.max()) + 1
+                    labels[own[side]] = new
+                    n_split += 1
+                    nxt += [piece, new]
+            if not nxt:
+                break
+            todo = nxt
     return _stable(labels), n_split
+
+
+def _members(labels: np.ndarray, wanted: list, index: np.ndarray | None = None
+             ) -> dict[int, np.ndarray]:
+    """For each label in ``wanted``, the positions (or ``index`` entries) holding it, ascending."""
+    order = np.argsort(labels, kind="stable")
+    ranked = labels[order]
+    at = order if index is None else index[order]
+    lo = np.searchsorted(ranked, wanted, side="left")
+    hi = np.searchsorted(ranked, wanted, side="right")
+    return {int(p): at[a:b] for p, a, b in zip(wanted, lo, hi, strict=True)}
 
 
 def _wrapped_side(local: np.ndarray, own: np.ndarray, graph, labels: np.ndarray,

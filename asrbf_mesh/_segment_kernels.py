@@ -159,6 +159,8 @@ def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> n
     >>> jump_pairs(pts, 0.5, 5.0, 1.0).tolist()
     [[0, 1], [1, 2]]
     """
+    from ._network_kernels import in_threads, threads_for
+
     pts = np.ascontiguousarray(local, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3 or not np.isfinite(pts).all():
         raise ValueError("jump_pairs: points must be a finite (N, 3) array")
@@ -177,21 +179,52 @@ def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> n
     key = ij[:, 1] * nx + ij[:, 0]
     order = np.argsort(key, kind="stable")
     start = np.searchsorted(key[order], np.arange(nx * ny + 1))
-    out = _pairs(pts, ij, order, start, nx, ny, radius * radius, float(slope), float(jump))
+    args = (pts, ij, order, start, nx, ny, radius * radius, float(slope), float(jump))
+    some = np.zeros(len(pts), dtype=np.bool_)
+    in_threads(_pair_marks, len(pts), threads_for(len(pts)), *args, some)
+    out = _pairs(*args, some)
     return out[np.lexsort((out[:, 1], out[:, 0]))]
 
 
 @njit(cache=True, nogil=True)
-def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump):
-    # two sweeps: the first counts the pairs and marks the points that have some, the
-    # second fills them from the marked points only (jumps are rare: one kernel to
-    # compile, no growing list, and the second sweep costs almost nothing)
+def _pair_marks(pts, ij, order, start, nx, ny, r2, slope, jump, some, i0, i1):
+    # whether each point i in [i0, i1) has a jump partner k > i: the first one found
+    # ends its search (jumps are rare; the pairs are listed from the marked points)
+    for i in range(i0, i1):
+        ci, cj = ij[i, 0], ij[i, 1]
+        for dj in range(-1, 2):
+            y = cj + dj
+            if some[i] or y < 0 or y >= ny:
+                continue
+            for di in range(-1, 2):
+                x = ci + di
+                if some[i] or x < 0 or x >= nx:
+                    continue
+                c = y * nx + x
+                for t in range(start[c], start[c + 1]):
+                    k = order[t]
+                    if k <= i:
+                        continue
+                    dx = pts[k, 0] - pts[i, 0]
+                    dy = pts[k, 1] - pts[i, 1]
+                    d2 = dx * dx + dy * dy
+                    if d2 > r2:
+                        continue
+                    dz = abs(pts[k, 2] - pts[i, 2])
+                    if dz > jump and dz * dz > slope * slope * d2:
+                        some[i] = True
+                        break
+
+
+@njit(cache=True, nogil=True)
+def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump, some):
+    # two sweeps over the marked points: the first counts their pairs, the second fills
+    # them (one kernel to compile, no growing list)
     out = np.empty((0, 2), dtype=np.int64)
-    some = np.zeros(pts.shape[0], dtype=np.bool_)
     for sweep in range(2):
         n = 0
         for i in range(pts.shape[0]):
-            if sweep == 1 and not some[i]:
+            if not some[i]:
                 continue
             ci, cj = ij[i, 0], ij[i, 1]
             for dj in range(-1, 2):
@@ -217,8 +250,6 @@ def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump):
                             if sweep == 1:
                                 out[n, 0] = i
                                 out[n, 1] = k
-                            else:
-                                some[i] = True
                             n += 1
         if sweep == 0:
             out = np.empty((n, 2), dtype=np.int64)

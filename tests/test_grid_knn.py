@@ -176,3 +176,26 @@ def test_nearest_feature_needs_a_2d_raster_with_a_feature() -> None:
         nearest_feature(np.zeros((3, 3), dtype=bool))
     with pytest.raises(ValueError, match="2D"):
         nearest_feature(np.ones(4, dtype=bool))
+
+
+@pytest.mark.parametrize("serial_below", [1, 10**9])
+def test_jump_pairs_are_every_pair_close_in_the_plane_and_far_in_depth(
+        serial_below: int, monkeypatch) -> None:
+    """Against brute force, on points with many jumps, split over threads or not."""
+    from asrbf_mesh import _network_kernels
+    from asrbf_mesh._segment_kernels import jump_pairs
+
+    monkeypatch.setattr(_network_kernels, "SERIAL_BELOW", serial_below)
+
+    rng = np.random.default_rng(3)
+    xy = rng.random((3000, 2)) * 10
+    z = np.where(xy[:, 0] > 5, 4.0, 0.0) + rng.normal(0, 0.05, 3000)  # a cliff at x = 5
+    z[rng.choice(3000, 40, replace=False)] += 9.0  # and spikes
+    pts = np.c_[xy, z]
+    r, slope, jump = 0.4, 5.0, 1.0
+    d2 = ((xy[:, None] - xy[None]) ** 2).sum(-1)
+    dz = np.abs(z[:, None] - z[None])
+    want = np.argwhere(np.triu((d2 <= r * r) & (dz > jump) & (dz * dz > slope * slope * d2), 1))
+    got = jump_pairs(pts, r, slope, jump)
+    assert len(got) > 100
+    np.testing.assert_array_equal(got, want)
