@@ -186,6 +186,19 @@ def jump_pairs(local: np.ndarray, radius: float, slope: float, jump: float) -> n
     return out[np.lexsort((out[:, 1], out[:, 0]))]
 
 
+@njit(cache=True, inline="always")
+def _is_jump(pts, i, k, r2, slope, jump):
+    # within r of each other in the view plane, farther apart in depth than jump and
+    # than the slope allows
+    dx = pts[k, 0] - pts[i, 0]
+    dy = pts[k, 1] - pts[i, 1]
+    d2 = dx * dx + dy * dy
+    if d2 > r2:
+        return False
+    dz = abs(pts[k, 2] - pts[i, 2])
+    return dz > jump and dz * dz > slope * slope * d2
+
+
 @njit(cache=True, nogil=True)
 def _pair_marks(pts, ij, order, start, nx, ny, r2, slope, jump, some, i0, i1):
     # whether each point i in [i0, i1) has a jump partner k > i: the first one found
@@ -203,15 +216,7 @@ def _pair_marks(pts, ij, order, start, nx, ny, r2, slope, jump, some, i0, i1):
                 c = y * nx + x
                 for t in range(start[c], start[c + 1]):
                     k = order[t]
-                    if k <= i:
-                        continue
-                    dx = pts[k, 0] - pts[i, 0]
-                    dy = pts[k, 1] - pts[i, 1]
-                    d2 = dx * dx + dy * dy
-                    if d2 > r2:
-                        continue
-                    dz = abs(pts[k, 2] - pts[i, 2])
-                    if dz > jump and dz * dz > slope * slope * d2:
+                    if k > i and _is_jump(pts, i, k, r2, slope, jump):
                         some[i] = True
                         break
 
@@ -238,15 +243,7 @@ def _pairs(pts, ij, order, start, nx, ny, r2, slope, jump, some):
                     c = y * nx + x
                     for t in range(start[c], start[c + 1]):
                         k = order[t]
-                        if k <= i:
-                            continue
-                        dx = pts[k, 0] - pts[i, 0]
-                        dy = pts[k, 1] - pts[i, 1]
-                        d2 = dx * dx + dy * dy
-                        if d2 > r2:
-                            continue
-                        dz = abs(pts[k, 2] - pts[i, 2])
-                        if dz > jump and dz * dz > slope * slope * d2:
+                        if k > i and _is_jump(pts, i, k, r2, slope, jump):
                             if sweep == 1:
                                 out[n, 0] = i
                                 out[n, 1] = k
