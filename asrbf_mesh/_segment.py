@@ -513,27 +513,26 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     n_split = 0
     todo = list(np.unique(labels[jumps[:, 0]]))
 
-    def sides(own: np.ndarray, inner: np.ndarray) -> np.ndarray | None:
-        if len(inner) < _MIN_CLIFF_PAIRS:
-            return None
-        return _wrapped_side(local, own, graph, labels, anchor,
-                             _largest_cliff(local[:, :2], inner, radius))
+    def sides(piece: int, inner: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        own = np.flatnonzero(labels == piece)
+        return own, _wrapped_side(local, own, graph, labels, anchor,
+                                  _largest_cliff(local[:, :2], inner, radius))
 
     with ThreadPoolExecutor(max_workers=2) as pool:
         for _ in range(_SPLIT_ROUNDS):
-            # each piece's points and its jump pairs inside it, in index order (stable sorts)
-            points = _members(labels, todo)
+            # each piece's jump pairs inside it, in index order (one stable sort)
             first = labels[jumps[:, 0]]
             within = np.flatnonzero(first == labels[jumps[:, 1]])
-            pairs = {p: jumps[k] for p, k in _members(first[within], todo, within).items()}
+            pairs = {p: jumps[k] for p, k in _members(first[within], todo, within).items()
+                     if len(k) >= _MIN_CLIFF_PAIRS}
             # the pieces of a round are apart (a search stays in its piece): their searches
             # run two at a time, the largest first; the splits then go in the round's order
-            order = sorted(todo, key=lambda p: -len(pairs[p]))
-            found = dict(zip(order, pool.map(sides, [points[p] for p in order],
-                                             [pairs[p] for p in order]), strict=True))
+            order = sorted(pairs, key=lambda p: -len(pairs[p]))
+            found = dict(zip(order, pool.map(sides, order, [pairs[p] for p in order]),
+                             strict=True))
             nxt = []
             for piece in todo:
-                own, side = points[piece], found[piece]
+                own, side = found.get(int(piece), (None, None))
                 if side is not None:
                     new = int(labels.max()) + 1
                     labels[own[side]] = new
@@ -545,12 +544,10 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     return _stable(labels), n_split
 
 
-def _members(labels: np.ndarray, wanted: list, index: np.ndarray | None = None
-             ) -> dict[int, np.ndarray]:
-    """For each label in ``wanted``, the positions (or ``index`` entries) holding it, ascending."""
+def _members(labels: np.ndarray, wanted: list, index: np.ndarray) -> dict[int, np.ndarray]:
+    """For each label in ``wanted``, the entries of ``index`` whose label it is, in order."""
     order = np.argsort(labels, kind="stable")
-    ranked = labels[order]
-    at = order if index is None else index[order]
+    ranked, at = labels[order], index[order]
     lo = np.searchsorted(ranked, wanted, side="left")
     hi = np.searchsorted(ranked, wanted, side="right")
     return {int(p): at[a:b] for p, a, b in zip(wanted, lo, hi, strict=True)}
