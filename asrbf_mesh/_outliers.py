@@ -108,10 +108,10 @@ def isolated_points(points: np.ndarray, *, neighbours: int = NEIGHBOURS,
     u = (p - lo) / ext  # each axis in units of its robust extent, as the frame does
     bound = rel * float(np.sqrt(u.shape[1]))  # of the robust box's diagonal
     # the threshold is max(bound, DENSITY_FACTOR x the median k-th distance): when more
-    # than half of the points have k others in their cell of a grid fine enough that a
-    # cell's diagonal is under bound / DENSITY_FACTOR, the median cannot raise it, and a
-    # point with k others in its cell of a grid whose cell diagonal is under the bound
-    # is not isolated. Only the others need their neighbours (none on a real scan)
+    # than half of the points have k others within bound / DENSITY_FACTOR, the median
+    # cannot raise it, and a point with k others within the bound is not isolated (both
+    # counted on grids, _crowded). Only the others need their neighbours measured (none
+    # on a real scan)
     fine = _crowded(u, bound / DENSITY_FACTOR, k)
     if 2 * int(fine.sum()) > n:
         doubt = np.flatnonzero(~fine)

@@ -557,19 +557,19 @@ def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: n
     """:func:`solve_and_drop` by strips of neurons: O(K^3 / T^2) instead of O(K^3).
 
     The weights are solved by block Gauss-Seidel over ``T`` strips of about
-    :data:`TILE_NEURONS` neurons (the bias in every block; the other blocks' weights
-    fixed at their latest values), :data:`TILE_SWEEPS` sweeps, each block's step from
-    the same ridged normal equations as the whole solve. Then each strip drops its
-    neurons by the same backward elimination, the other strips' weights fixed, within
-    its share of the budget (its share of the sweeps' gain, and of ``extra`` by its
-    neurons); a last sweep solves the kept weights again. A strip prices a removal with
+    :data:`TILE_NEURONS` neurons (the bias in every block; the other blocks' weights fixed
+    at their latest values), :data:`TILE_SWEEPS` sweeps, each block's step from the same
+    ridged normal equations as the whole solve. Then each strip drops its neurons by the
+    same backward elimination, the other strips' weights fixed, within its share of the
+    budget (the whole budget, ``extra`` included, split in proportion to what each strip's
+    steps gained); a last sweep solves the kept weights again. A strip prices a removal with
     only its own weights free to make up for it, so at least as high as the whole solve
     would (a principal block's inverse has the smaller diagonal): K comes out a little
-    higher. On the face map (main piece 880-1,010 neurons after the tails, 3-4 strips;
-    seeds 0-9): K 720 -> 735 (median; worst seed 767 -> 781), E-bar 0.00188 either way,
-    the default reconstruction's 99.9th percentiles (samples in triangles -> mesh, mesh
-    -> scan) 0.326 / 0.442 -> 0.321 / 0.438 % of the diagonal, the solves and drops of a
-    fit's pieces 40-60 -> 18-20 ms, the fit 0.41 -> 0.38 s (medians of the fastest of 3).
+    higher. On the face map (main piece 880-1,010 neurons after the tails, 3-4 strips; seeds
+    0-9): K 720 -> 735 (median; worst seed 767 -> 781), E-bar 0.00188 either way, the
+    default reconstruction's 99.9th percentiles (samples in triangles -> mesh, mesh -> scan)
+    0.326 / 0.442 -> 0.321 / 0.438 % of the diagonal, the solves and drops of a fit's pieces
+    40-60 -> 18-20 ms, the fit 0.41 -> 0.38 s (medians of the fastest of 3).
     """
     import scipy.linalg as sla
 

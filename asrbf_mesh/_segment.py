@@ -518,7 +518,11 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
         return own, _wrapped_side(local, own, graph, labels, anchor,
                                   _largest_cliff(local[:, :2], inner, radius))
 
-    with ThreadPoolExecutor(max_workers=2) as pool:
+    from numba import get_num_threads
+
+    # two searches at a time where numba may use two threads (a batch worker pinned to
+    # one thread searches one piece after another)
+    with ThreadPoolExecutor(max_workers=max(1, min(2, get_num_threads()))) as pool:
         for _ in range(_SPLIT_ROUNDS):
             # each piece's jump pairs inside it, in index order (one stable sort)
             first = labels[jumps[:, 0]]
