@@ -926,3 +926,43 @@ def test_a_disk_fill_keeps_its_interior_small_whatever_the_rim() -> None:
     assert 0 < len(new) <= 1.2 * _DISK_SAMPLES
     assert np.all(np.isfinite(new))
     assert set(np.unique(tris[tris >= 0])) <= set(loop.tolist())
+
+
+def _grid(nx: int, ny: int, x0: float = 0.0, y0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    from asrbf_mesh._surface import grid_faces
+
+    x, y = np.meshgrid(np.arange(nx, dtype=float) + x0, np.arange(ny, dtype=float) + y0)
+    return np.c_[x.ravel(), y.ravel(), np.zeros(x.size)], grid_faces(ny, nx)
+
+
+def test_the_protocol_counts_a_fragment_pinched_at_a_vertex_as_a_part() -> None:
+    """Its border is an outer border (a bite out of it is a notch); a hole's is not."""
+    from asrbf_mesh._hole_loops import boundary_cycles
+    from asrbf_mesh.evaluate._punch_protocol import _part_borders
+
+    v, f = _grid(8, 8)
+    f = f[~np.isin(f, 27).any(axis=1)]  # a hole around the inner vertex 27
+    hole = [c for c in boundary_cycles(f) if 0 not in c]
+    assert len(hole) == 1
+    v2, f2 = _grid(3, 3, 7.0, 7.0)  # a 3 x 3 fragment whose corner is the grid's corner 63
+    f2 = f2 + len(v)
+    f2[f2 == len(v)] = 63
+    faces = np.vstack([f, f2])
+    borders = _part_borders(faces, len(v) + len(v2))
+    assert len(borders) == 2
+    assert sorted(len(b) for b in borders) == [8, 28]  # the fragment's and the grid's
+    assert not any(set(b.tolist()) == set(h.tolist()) for b in borders for h in hole)
+
+
+def test_the_protocol_leaves_out_a_fragment_erased_whole() -> None:
+    """Truth with no kept, meshed vertex beside it has nothing around it to fill from."""
+    from asrbf_mesh.evaluate._punch_protocol import _rimmed
+
+    v, f = _grid(6, 6)
+    v2, f2 = _grid(2, 2, 10.0, 0.0)  # an island of two triangles, far from the grid
+    faces = np.vstack([f, f2 + len(v)])
+    removed = np.zeros(len(v) + len(v2), dtype=bool)
+    removed[[14, 15, 20, 21]] = True  # inside the grid: a hole with a rim
+    removed[len(v):] = True  # the whole island
+    hole = np.r_[np.zeros(4, int), np.ones(4, int)]  # removed points in index order
+    assert _rimmed(hole, removed, faces).tolist() == [True, False]

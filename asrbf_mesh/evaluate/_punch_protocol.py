@@ -23,8 +23,12 @@ the border traced through its pinches has 2,419-2,762, and a disk punched into t
 of the border counts as enclosed although it opens to the outside (8 of 46 holes over
 seeds 0-9). ``border="traced"`` uses the loop traced through pinch vertices
 (:func:`asrbf_mesh._hole_loops.boundary_cycles`); ``border="parts"`` the outer border of
-every connected part (its longest cycle), so that a disk bitten out of the border of a
-fragment (an ear seen apart from the head) is a notch too.
+every part (its longest cycle; parts joined by triangles' edges, not at a pinch
+vertex), so that a disk bitten out of the border of a fragment (an ear seen apart from
+the head, or a fragment touching the rest at one corner) is a notch too. With
+``"parts"``, a fragment the disks erased whole (no kept vertex still in a triangle
+shares one with its truth) is left out too: there is no surface around it to continue,
+only empty space (synthetic view syn270, seed 4: 4 points of a 3-triangle island).
 
 A hole is scored by the RMS of its truth points' distances to the output surface, in %
 of the diagonal; the pooled RMS runs over all enclosed truth points.
@@ -100,7 +104,11 @@ def punch_protocol(scan: Scan, seed: int = 0, border: str = "igl") -> PunchedHol
 
     ``border`` is how the outer border is traced to tell notches: ``"igl"`` (libigl's
     longest boundary loop, as the protocol was first run), ``"traced"`` (through
-    pinch vertices) or ``"parts"`` (every connected part's outer border).
+    pinch vertices) or ``"parts"`` (the outer border of every part, parts joined by
+    triangles' edges, so that a fragment pinched to the rest at one vertex is a part of
+    its own; and a fragment erased whole, its truth sharing no triangle with a vertex
+    the punched scan still meshes, is no enclosed hole either: nothing is left around
+    it to fill from).
 
     Raises
     ------
@@ -139,6 +147,8 @@ def punch_protocol(scan: Scan, seed: int = 0, border: str = "igl") -> PunchedHol
     punched = Scan(*remove_points(pts, base.faces, removed), source=scan.source)
     truth = pts[removed]
     hole, enclosed = _holes(truth, punched, xy, base.bbox_diagonal, border)
+    if border == "parts":  # a fragment erased whole left no rim to fill from
+        enclosed &= _rimmed(hole, removed, base.faces)
     return PunchedHoles(punched, truth, hole, enclosed, cen, rad, base.bbox_diagonal)
 
 
@@ -155,19 +165,77 @@ def _holes(truth: np.ndarray, punched: Scan, xy: np.ndarray, diagonal: float,
         loops = boundary_loops(punched.faces)
         outer = [max(loops, key=len)] if loops else []
     else:
-        from .._hole_loops import boundary_cycles, outer_loops
+        from .._hole_loops import boundary_cycles
 
         if border == "traced":
             outer = boundary_cycles(punched.faces)
             outer = [max(outer, key=len)] if outer else []
-        else:  # every connected part's outer border
-            outer = outer_loops(punched.faces, len(punched.points))
+        else:  # every part's outer border
+            outer = _part_borders(punched.faces, len(punched.points))
     enclosed = np.ones(n, dtype=bool)
     if outer:
         d, _ = cKDTree(punched.points[np.concatenate(outer)]).query(truth)
         near = d <= 0.004 * diagonal
         enclosed[np.unique(hole[near])] = False
     return hole.astype(np.int64), enclosed
+
+
+def _part_borders(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
+    """Return the longest boundary cycle of each part, parts joined by edges.
+
+    A fragment that touches the rest of the scan at one pinch vertex is a part of its
+    own: a disk bitten out of its border is a notch, as one bitten out of a free-standing
+    fragment's. The cycles are traced through pinches and cut there
+    (:func:`~asrbf_mesh._hole_loops.simple_cycles`); each goes with the part of the
+    triangle its first edge borders.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from .._hole_loops import boundary_cycles, simple_cycles
+
+    m = len(faces)
+    he = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).astype(np.int64)
+    owner = np.tile(np.arange(m), 3)
+    key = np.minimum(he[:, 0], he[:, 1]) * n_vertices + np.maximum(he[:, 0], he[:, 1])
+    order = np.argsort(key, kind="stable")
+    same = np.flatnonzero(key[order][1:] == key[order][:-1])  # an edge two triangles share
+    a, b = owner[order][same], owner[order][same + 1]
+    _, part = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)),
+                                   directed=False)
+    directed = he[:, 0] * n_vertices + he[:, 1]
+    by_key = dict(zip(directed.tolist(), owner.tolist(), strict=True))
+    longest: dict[int, np.ndarray] = {}
+    for cycle in boundary_cycles(faces):
+        for c in simple_cycles(cycle):
+            g = int(part[by_key[int(c[0]) * n_vertices + int(c[1])]])
+            if g not in longest or len(c) > len(longest[g]):
+                longest[g] = c
+    return list(longest.values())
+
+
+def _rimmed(hole: np.ndarray, removed: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Which holes have a rim: a kept vertex, still in a triangle, that shared one with them.
+
+    ``hole`` numbers the removed points (in their order); a hole without such a vertex is
+    a fragment the disks erased whole (an island of a few triangles), with nothing left
+    around it that a fill could continue.
+    """
+    n = int(hole.max()) + 1 if len(hole) else 0
+    of = np.full(len(removed), -1, dtype=np.int64)
+    of[removed] = hole
+    hit = removed[faces]
+    touched = faces[hit.any(axis=1)]
+    kept_used = np.zeros(len(removed), dtype=bool)
+    kept_used[faces[~hit.any(axis=1)].ravel()] = True
+    rimmed = np.zeros(n, dtype=bool)
+    for corner in range(3):  # a touched triangle's removed corners see its kept, used ones
+        h = of[touched[:, corner]]
+        rim = np.zeros(len(touched), dtype=bool)
+        for other in range(3):
+            rim |= kept_used[touched[:, other]]
+        rimmed[h[(h >= 0) & rim]] = True
+    return rimmed
 
 
 def score_holes(punched: PunchedHoles, surface: Mesh) -> tuple[np.ndarray, float]:
