@@ -12,8 +12,9 @@ Each hole selected by size is filled without touching the scan: new vertices
 inside the hole at the scan's own spacing (or its rim's, where the scan is sampled more
 coarsely: :data:`LOCAL_SPACING`), a constrained triangulation in xy
 (``triangle``, with no extra vertex on the hole's boundary so the rim edges are
-shared exactly), depths from a thin-plate spline of the scan points around the rim,
-fitted over the ring's own best-fit plane; where that plane is seen too obliquely or
+shared exactly), depths from a spline of the scan points around the rim (the mean of
+a thin-plate and a cubic polyharmonic spline), fitted over the ring's own best-fit
+plane; where that plane is seen too obliquely or
 the ring is too curved for one, from the network's low-frequency substrate (its
 neurons at least as wide as the hole) plus the scan's residual ``z - f`` around the rim
 carried across the hole by a thin-plate spline (:mod:`asrbf_mesh._hole_patch`). Either
@@ -462,9 +463,9 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         this length in scan units, or a percentage of the scan's bounding-box
         diagonal such as ``"5%"``. Default: every hole.
     blend : {"thin-plate", "harmonic"}
-        ``"thin-plate"`` (default): a thin-plate spline of the scan points within
-        max(6 spacings, 0.18 x the hole size) of the rim, over the ring's own
-        best-fit plane, or, where that plane does not suit, the network's substrate
+        ``"thin-plate"`` (default): a smoothing spline of the scan points within
+        max(6 spacings, 0.18 x the hole size) of the rim (the mean of a thin plate and
+        a cubic polyharmonic spline), over the ring's own best-fit plane, or, where that plane does not suit, the network's substrate
         plus a thin plate of the residual ``z - f`` in the view plane;
         ``"harmonic"``: the substrate plus a harmonic interpolation of the rim
         residuals alone (C0 only).

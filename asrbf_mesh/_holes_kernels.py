@@ -288,16 +288,19 @@ def _edt(mask):
     return np.sqrt(d2)
 
 
-def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0
-               ) -> tuple[np.ndarray, ...] | None:
-    """Thin-plate spline in 2D with a linear term: its coefficients, or None.
+def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0,
+               cubic: float = 0.0) -> tuple[np.ndarray, ...] | None:
+    """Thin-plate spline in 2D with a linear term (or its mean with a cubic one), or None.
 
     ``s(x) = sum_j w_j phi(|x - y_j|) + a_0 + a . (x - shift) / scale``, ``phi(r) = r^2
     log r``, the polynomial on the centres' box mapped to [-1, 1] (as scipy's
     ``RBFInterpolator`` does); interpolating, or with ``smoothing`` added to the kernel
-    matrix's diagonal (scipy's ``smoothing``) a smoothing spline. Returns (centres, w, a,
-    shift, scale) for :func:`ray_depths`, None when the centres are fewer than 3 or on
-    one line, or the system is singular (points repeated).
+    matrix's diagonal (scipy's ``smoothing``) a smoothing spline. With ``cubic`` > 0 the
+    result is ``(1 - cubic)`` times that spline plus ``cubic`` times the same spline of
+    the kernel ``r^3`` (scipy's ``"cubic"``): both fitted to the data, their values
+    averaged. Returns (centres, weights (n, 2): thin plate's and cubic's, a, shift, scale)
+    for :func:`ray_depths`, None when the centres are fewer than 3 or on one line, or a
+    system is singular (points repeated).
     """
     y = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 2)
     d = np.ascontiguousarray(values, dtype=np.float64).ravel()
@@ -311,18 +314,25 @@ def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0
     P = np.column_stack([np.ones(n), (y - shift) / scale])
     if np.linalg.matrix_rank(P) < 3:
         return None
-    A = np.zeros((n + 3, n + 3))
-    A[:n, :n] = _tps_gram(y)
-    if smoothing > 0.0:
-        A[np.arange(n), np.arange(n)] += smoothing
-    A[:n, n:] = P
-    A[n:, :n] = P.T
-    # scipy's LAPACK, as its RBFInterpolator does (numpy's solve: two fills side by side,
-    # a batch's or the benchmark's workers, ran 2x slower in its OpenBLAS threads)
-    _, _, sol, info = dgesv(A, np.r_[d, np.zeros(3)])
-    if info != 0 or not np.all(np.isfinite(sol)):
-        return None
-    return y, sol[:n].copy(), sol[n:].copy(), shift, scale
+    w = np.zeros((n, 2))
+    a = np.zeros(3)
+    for kernel, share in ((0, 1.0 - cubic), (1, cubic)):
+        if share <= 0.0:
+            continue
+        A = np.zeros((n + 3, n + 3))
+        A[:n, :n] = _gram(y, kernel)
+        if smoothing > 0.0:
+            A[np.arange(n), np.arange(n)] += smoothing
+        A[:n, n:] = P
+        A[n:, :n] = P.T
+        # scipy's LAPACK, as its RBFInterpolator does (numpy's solve: two fills side by
+        # side, a batch's or the benchmark's workers, ran 2x slower in its OpenBLAS threads)
+        _, _, sol, info = dgesv(A, np.r_[d, np.zeros(3)])
+        if info != 0 or not np.all(np.isfinite(sol)):
+            return None
+        w[:, kernel] = share * sol[:n]
+        a += share * sol[n:]
+    return y, w, a, shift, scale
 
 
 def ray_depths(q: np.ndarray, c: np.ndarray, axes: np.ndarray, normal: np.ndarray,
@@ -331,10 +341,10 @@ def ray_depths(q: np.ndarray, c: np.ndarray, axes: np.ndarray, normal: np.ndarra
     """Depth where the view ray (along z) through each xy point ``q`` meets a surface.
 
     The surface is the points ``c + size (u axes_0 + v axes_1) + size s(u, v) normal``
-    with ``s`` a :func:`thin_plate` spline. Secant iterations along the ray, from its
-    meeting with the plane (s = 0) and 0.01 x ``size`` beyond, stop once the ray is
-    ``done`` x ``size`` from the surface (at most 8 steps); a ray still farther than
-    ``ok`` x ``size`` gives NaN. (Newton's iterations met more rays, but on a plane seen
+    with ``s`` a :func:`thin_plate` spline (or the mean of two). Secant iterations along
+    the ray, from its meeting with the plane (s = 0) and 0.01 x ``size`` beyond, stop once
+    the ray is ``done`` x ``size`` from the surface (at most 8 steps); a ray still farther
+    than ``ok`` x ``size`` gives NaN. (Newton's iterations met more rays, but on a plane seen
     obliquely a fifth of them at another crossing of the surface, up to 0.4 x ``size``
     away: the fill takes the view plane where the secant finds no crossing near the
     plane.)
@@ -354,18 +364,30 @@ def ray_depths(q: np.ndarray, c: np.ndarray, axes: np.ndarray, normal: np.ndarra
 
 
 @njit(cache=True)
-def _tps_gram(y):
+def _gram(y, kernel):
+    """Kernel matrix of the centres: ``r^2 log r`` (kernel 0) or ``r^3`` (kernel 1)."""
     n = y.shape[0]
     K = np.zeros((n, n))
     for i in range(n):
         for j in range(i + 1, n):
             dx = y[i, 0] - y[j, 0]
             dy = y[i, 1] - y[j, 1]
-            r2 = dx * dx + dy * dy
-            v = 0.5 * r2 * np.log(r2) if r2 > 0.0 else 0.0
+            v = _phi(dx * dx + dy * dy, 1.0 - kernel, float(kernel))
             K[i, j] = v
             K[j, i] = v
     return K
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _phi(r2, w_plate, w_cubic):
+    """``w_plate r^2 log r + w_cubic r^3`` at squared distance ``r2``."""
+    out = 0.0
+    if r2 > 0.0:
+        if w_plate != 0.0:
+            out += w_plate * 0.5 * r2 * np.log(r2)
+        if w_cubic != 0.0:
+            out += w_cubic * r2 * np.sqrt(r2)
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -374,9 +396,7 @@ def _tps_value(u, v, y, w, a, shift, scale):
     for j in range(y.shape[0]):
         dx = u - y[j, 0]
         dy = v - y[j, 1]
-        r2 = dx * dx + dy * dy
-        if r2 > 0.0:
-            s += w[j] * 0.5 * r2 * np.log(r2)
+        s += _phi(dx * dx + dy * dy, w[j, 0], w[j, 1])
     return s
 
 

@@ -79,6 +79,13 @@ def test_thin_plate_matches_scipy_and_rays_meet_it() -> None:
     assert np.abs(flat - ref(q)).max() < 1e-9
     at = hk.ray_depths(uv, np.zeros(3), np.eye(3)[:2], np.eye(3)[2], 1.0, smooth, 1e-12, 1e-6)
     assert np.abs(at - h).max() > 1e-6
+    # the cubic spline, and the mean of the two
+    for share in (1.0, 0.5):
+        mixed = hk.thin_plate(uv, h, 1e-3, cubic=share)
+        cub = RBFInterpolator(uv, h, kernel="cubic", smoothing=1e-3)
+        flat = hk.ray_depths(q, np.zeros(3), np.eye(3)[:2], np.eye(3)[2], 1.0, mixed, 1e-12,
+                             1e-6)
+        assert np.abs(flat - (share * cub(q) + (1 - share) * ref(q))).max() < 1e-9
 
 
 def test_a_rings_noise_is_measured_and_a_smooth_ring_has_none() -> None:
