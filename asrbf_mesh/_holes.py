@@ -465,8 +465,9 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     blend : {"thin-plate", "harmonic"}
         ``"thin-plate"`` (default): a smoothing spline of the scan points within
         max(6 spacings, 0.18 x the hole size) of the rim (the mean of a thin plate and
-        a cubic polyharmonic spline), over the ring's own best-fit plane, or, where that plane does not suit, the network's substrate
-        plus a thin plate of the residual ``z - f`` in the view plane;
+        a cubic polyharmonic spline), over the ring's own best-fit plane, or, where
+        that plane does not suit, the network's substrate plus a thin plate of the
+        residual ``z - f`` in the view plane;
         ``"harmonic"``: the substrate plus a harmonic interpolation of the rim
         residuals alone (C0 only).
     lowpass_rel : float or None

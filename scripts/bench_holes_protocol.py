@@ -16,8 +16,9 @@ output, % of the diagonal; with ``--poisson`` the same for screened Poisson (dep
 ``--peers`` adds MeshFix, MeshLab Close Holes, VTK's hole filter and a thin-plate height
 field (:mod:`_hole_peers`, the ``bench`` extra). Every table comes twice: notches told
 from enclosed holes by libigl's longest boundary loop (the issue's protocol), and by the
-outer border of every connected part, traced through pinch vertices (a bite out of a
-fragment's border is a notch; see :mod:`asrbf_mesh.evaluate._punch_protocol`).
+outer border of every part, parts joined by triangles' edges (a bite out of a
+fragment's border is a notch, a fragment pinched to the rest at a vertex is a part, a
+fragment erased whole is no hole; see :mod:`asrbf_mesh.evaluate._punch_protocol`).
 """
 
 from __future__ import annotations
@@ -240,9 +241,10 @@ def main(argv: list[str] | None = None) -> int:
 
         traced_open = [(r["name"], r["seed"], why) for r in done
                        for why, t in zip(r["open"], r["traced"], strict=True) if why and t]
+        enclosed = sum(int(np.sum(r["traced"])) for r in done)
         lines = lines[:1] + [
-            f"- enclosed holes, notches told by every part's outer border (traced through "
-            f"pinch vertices): {sum(int(np.sum(r['traced'])) for r in done):,}; left open: "
+            f"- enclosed holes, notches told by every part's outer border (parts joined by "
+            f"edges; fragments erased whole left out): {enclosed:,}; left open: "
             f"{len(traced_open)}"]
         lines += [f"  - {label(n)} seed {s}: {why}" for n, s, why in (bad + traced_open)[:20]]
         lines.append(f"- enclosed holes by libigl's longest boundary loop (the issue's "
@@ -298,8 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     parts = []
     for traced in (False, True):
         parts.append("### Notches told by libigl's longest boundary loop (the issue's protocol)"
-                     if not traced else "### Notches told by every part's outer border, traced "
-                     "through pinch vertices")
+                     if not traced else "### Notches told by every part's outer border (parts "
+                     "joined by edges; fragments erased whole left out)")
         for name in [*names, "pooled"]:
             rs = [r for r in done if name in ("pooled", r["name"])]
             if rs:

@@ -204,13 +204,16 @@ def _part_borders(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
     _, part = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)),
                                    directed=False)
     directed = he[:, 0] * n_vertices + he[:, 1]
-    by_key = dict(zip(directed.tolist(), owner.tolist(), strict=True))
+    by_key = np.argsort(directed, kind="stable")
+    cycles = [c for cycle in boundary_cycles(faces) for c in simple_cycles(cycle)]
+    if not cycles:
+        return []
+    first = np.array([int(c[0]) * n_vertices + int(c[1]) for c in cycles])
+    group = part[owner[by_key[np.searchsorted(directed[by_key], first)]]]
     longest: dict[int, np.ndarray] = {}
-    for cycle in boundary_cycles(faces):
-        for c in simple_cycles(cycle):
-            g = int(part[by_key[int(c[0]) * n_vertices + int(c[1])]])
-            if g not in longest or len(c) > len(longest[g]):
-                longest[g] = c
+    for g, c in zip(group.tolist(), cycles, strict=True):
+        if g not in longest or len(c) > len(longest[g]):
+            longest[g] = c
     return list(longest.values())
 
 
@@ -228,13 +231,10 @@ def _rimmed(hole: np.ndarray, removed: np.ndarray, faces: np.ndarray) -> np.ndar
     touched = faces[hit.any(axis=1)]
     kept_used = np.zeros(len(removed), dtype=bool)
     kept_used[faces[~hit.any(axis=1)].ravel()] = True
+    rim = kept_used[touched].any(axis=1)  # a touched triangle with a kept, used corner
+    h = of[touched[rim]].ravel()  # ... gives its removed corners' holes a rim
     rimmed = np.zeros(n, dtype=bool)
-    for corner in range(3):  # a touched triangle's removed corners see its kept, used ones
-        h = of[touched[:, corner]]
-        rim = np.zeros(len(touched), dtype=bool)
-        for other in range(3):
-            rim |= kept_used[touched[:, other]]
-        rimmed[h[(h >= 0) & rim]] = True
+    rimmed[h[h >= 0]] = True
     return rimmed
 
 
