@@ -250,9 +250,10 @@ def _residual_spline(ctx: Ctx, ring: np.ndarray, fnet: Network, centre: np.ndarr
 # bunny views 0.1664 -> 0.1641 / 66.4 -> 70.2 % / 173 of 265 (border="parts" with parts
 # joined by edges). The cubic spline alone: 0.1451 / 78.6 % and 0.1643 / 72.1 % (a view
 # hole at 0.546); r^2.5: 0.1447 / 80.7 % and 0.1657 / 69.8 %; the one kernel
-# r^2 log r + r^3: 0.1461 / 81.2 %; the thin plate with a quadratic term: 0.1472 /
-# 82.8 %; a linear kernel 0.189; the thin plate's mean with the network's view-plane
-# fill (below) 0.166-0.189, with a harmonic fill 0.19-0.35.
+# r^2 log r + r^3: 0.1461 / 81.2 % (dev); the thin plate with a quadratic term: 0.1472 /
+# 82.8 % (dev); a linear kernel 0.189 (dev); the thin plate's mean with the network's
+# view-plane fill (below) 0.166-0.189 (dev, weights 3:1 and 1:1), with a harmonic fill
+# of the rim's depths 0.19-0.35 (views, weights 3:1 to 0:1).
 _CUBIC = 0.5
 _MIN_NZ = 0.15
 _FLAT = 0.5
