@@ -340,7 +340,7 @@ def close_patch(pts: np.ndarray, rim: np.ndarray, seg: np.ndarray, tris: np.ndar
     cen = pts[tris].mean(axis=1)
     # drop triangles over the scan itself (islands inside the hole, concave rims)
     _, cand = cover_tree.query(cen, k=min(12, cover_tree.n))
-    keep = ~_hk.inside_any(cen, ctx.xy, cover_faces, cand)
+    keep = ~_hk.inside_any(cen, ctx.xy, cover_faces, cand, closed=True)
     if region is not None:
         keep &= region(cen)
     tris = tris[keep]

@@ -577,6 +577,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         if clash and reason is None:  # the loop stage closes what is left, in 3D
             reason = (f"{clash} triangles would have run against the scan's orientation or "
                       "given a scan edge a third face")
+        if reason is not None:  # judged by what is still open after the loop stage
             clashed[len(infos)] = np.r_[_rim_keys_of(h.edges), _edge_keys(placed)]
         if len(tris) == 0:
             infos.append(HoleInfo(**base, filled=False, reason=reason))

@@ -49,18 +49,21 @@ def coverage(xy: np.ndarray, faces: np.ndarray, lo: np.ndarray, cell: float, nx:
 
 
 def inside_any(points: np.ndarray, xy: np.ndarray, faces: np.ndarray,
-               cand: np.ndarray) -> np.ndarray:
+               cand: np.ndarray, *, closed: bool = False) -> np.ndarray:
     """For each point, whether it lies strictly inside one of its candidate triangles.
 
     ``cand`` holds each point's candidate triangle indices, (M, k) or (M,) as a
     ``cKDTree.query`` returns them for ``k`` = 1; an index past the last triangle
-    (``cKDTree``'s "no neighbour") or below 0 is skipped.
+    (``cKDTree``'s "no neighbour") or below 0 is skipped. With ``closed``, a point on a
+    triangle's edge or corner counts as inside too (within 1e-9 of its doubled area):
+    the centroid of a patch triangle laid over scan triangles on a lattice can fall
+    exactly on one of their corners.
     """
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
     xy, faces = _faces_in(xy, faces, "inside_any")
     cand = np.asarray(cand, dtype=np.int64).reshape(len(points), -1)
     cand = np.where((cand >= 0) & (cand < len(faces)), cand, -1)
-    return _inside_any(points, xy, faces, np.ascontiguousarray(cand))
+    return _inside_any(points, xy, faces, np.ascontiguousarray(cand), closed)
 
 
 @njit(cache=True, nogil=True)
@@ -96,8 +99,11 @@ def _coverage(xy, faces, lo, cell, nx, ny):
 
 
 @njit(cache=True)
-def _inside_any(points, xy, faces, cand):
-    """For each point p, whether it lies strictly inside one of the candidate triangles cand[p]."""
+def _inside_any(points, xy, faces, cand, closed):
+    """For each point p, whether it lies inside one of the candidate triangles cand[p].
+
+    Strictly inside, or with ``closed`` on its boundary too.
+    """
     n = points.shape[0]
     out = np.zeros(n, np.bool_)
     for p in range(n):
@@ -113,7 +119,7 @@ def _inside_any(points, xy, faces, cand):
             if area == 0.0:
                 continue
             s = 1.0 if area > 0 else -1.0
-            eps = 1e-9 * abs(area)
+            eps = -1e-9 * abs(area) if closed else 1e-9 * abs(area)
             w0 = s * _orient(xy[b, 0], xy[b, 1], xy[c, 0], xy[c, 1], px, py)
             w1 = s * _orient(xy[c, 0], xy[c, 1], xy[a, 0], xy[a, 1], px, py)
             w2 = s * _orient(xy[a, 0], xy[a, 1], xy[b, 0], xy[b, 1], px, py)

@@ -102,3 +102,14 @@ def test_a_rings_noise_is_measured_and_a_smooth_ring_has_none() -> None:
         got = _ring_noise(uv, surface + rng.normal(0.0, sigma, len(uv)))
         assert 0.7 < np.sqrt(got) / sigma < 1.3, (sigma, np.sqrt(got))
     assert _ring_noise(uv[:20], surface[:20]) == 0.0  # too few to tell
+
+
+def test_inside_any_closed_counts_corners_and_edges() -> None:
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    faces = np.array([[0, 1, 2]])
+    pts = np.array([[0.2, 0.2], [0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.6, 0.6], [-0.1, 0.2]])
+    cand = np.zeros(len(pts), np.int64)
+    assert hk.inside_any(pts, xy, faces, cand).tolist() == [True, False, False, False,
+                                                           False, False]
+    assert hk.inside_any(pts, xy, faces, cand, closed=True).tolist() == [True, True, True,
+                                                                        True, False, False]
