@@ -1011,3 +1011,27 @@ def test_a_hole_the_loop_stage_finishes_is_reported_filled(seed: int) -> None:
     assert len(boundary_cycles(res.mesh.faces)) == 1
     assert res.holes_found == res.holes_filled == 1
     assert all(h.reason is None for h in res.holes)
+
+
+def test_a_gap_the_border_walk_ran_through_is_closed_by_a_second_loop_pass() -> None:
+    """A Kinect crop meshed as its range grid (float32 coordinates, as a PLY holds them):
+    part of a 156-vertex hole's rim is walked as the outer border until the other loops
+    are filled, and becomes a loop of its own only then. One more pass of the loop stage
+    closes it (23 rim edges were left open)."""
+    from pathlib import Path
+
+    from asrbf_mesh._range import read_depth_image
+
+    g = read_depth_image(Path(__file__).parent / "data" / "tum_desk2_crop.png",
+                         depth_scale=5000, intrinsics=(520.9, 521.0, 305.1, 139.7))
+    s = g.to_scan()
+    scan = am.Scan((s.points * [1.0, -1.0, -1.0]).astype(np.float32).astype(np.float64),
+                   s.faces[:, ::-1])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(scan, seed=0, progress=False)
+    big = [h for h in res.holes if h.rim_vertices > 100]
+    assert len(big) == 1 and big[0].filled and big[0].reason is None
+    _, counts = edges_count(res.mesh.faces)
+    assert counts.max() == 2
+    assert np.array_equal(res.mesh.vertices[:scan.n_points], scan.points)
