@@ -433,3 +433,102 @@ def _ray_depths(q, c, axes, nrm, size, y, w, a, shift, scale, done, ok, out, i0,
             z1 = z2
             f1 = _ray_gap(px, py, z1, axes, nrm, size, y, w, a, shift, scale)
         out[p] = c[2] + z1 if abs(f1) <= ok * size else np.nan
+
+
+def touching(pts: np.ndarray, seg: np.ndarray, tol: float) -> tuple[np.ndarray, ...]:
+    """Vertices within ``tol`` of a segment's inside (not one of its ends).
+
+    Returns (segment, vertex, t) per hit, ``t`` in (0, 1) the vertex's place along the
+    segment; ``pts`` (n, 2) float64 and ``seg`` (m, 2) int64 indexing them.
+    """
+    pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
+    seg = np.ascontiguousarray(seg, dtype=np.int64).reshape(-1, 2)
+    if len(seg) and (seg.min() < 0 or seg.max() >= len(pts)):
+        raise ValueError("touching: a segment indexes no point")
+    order = np.argsort(pts[:, 0], kind="stable")
+    return _touching(pts, seg, float(tol), order, np.ascontiguousarray(pts[order, 0]))
+
+
+@njit(cache=True, nogil=True)
+def _touching(pts, seg, tol, order, xs):
+    hits_s, hits_v, hits_t = [], [], []
+    for s in range(seg.shape[0]):
+        a, b = seg[s, 0], seg[s, 1]
+        ax, ay, bx, by = pts[a, 0], pts[a, 1], pts[b, 0], pts[b, 1]
+        dx, dy = bx - ax, by - ay
+        L2 = dx * dx + dy * dy
+        if L2 == 0.0:
+            continue
+        lo = np.searchsorted(xs, min(ax, bx) - tol)
+        hi = np.searchsorted(xs, max(ax, bx) + tol, side="right")
+        ylo, yhi = min(ay, by) - tol, max(ay, by) + tol
+        for k in range(lo, hi):
+            v = order[k]
+            if v == a or v == b:
+                continue
+            px, py = pts[v, 0], pts[v, 1]
+            if py < ylo or py > yhi:
+                continue
+            t = ((px - ax) * dx + (py - ay) * dy) / L2
+            if t <= 0.0 or t >= 1.0:
+                continue
+            ex, ey = ax + t * dx - px, ay + t * dy - py
+            if ex * ex + ey * ey <= tol * tol:
+                hits_s.append(s)
+                hits_v.append(v)
+                hits_t.append(t)
+    n = len(hits_s)
+    out_s = np.empty(n, np.int64)
+    out_v = np.empty(n, np.int64)
+    out_t = np.empty(n, np.float64)
+    for i in range(n):
+        out_s[i] = hits_s[i]
+        out_v[i] = hits_v[i]
+        out_t[i] = hits_t[i]
+    return out_s, out_v, out_t
+
+
+def crossings(pts: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Return the points (k, 2) where two segments sharing no end cross inside both."""
+    pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
+    seg = np.ascontiguousarray(seg, dtype=np.int64).reshape(-1, 2)
+    if len(seg) and (seg.min() < 0 or seg.max() >= len(pts)):
+        raise ValueError("crossings: a segment indexes no point")
+    xmin = np.minimum(pts[seg[:, 0], 0], pts[seg[:, 1], 0])
+    order = np.argsort(xmin, kind="stable")
+    return _crossings(pts, np.ascontiguousarray(seg[order]), np.ascontiguousarray(xmin[order]))
+
+
+@njit(cache=True, nogil=True)
+def _crossings(pts, seg, xmin):
+    out = []
+    m = seg.shape[0]
+    for i in range(m):
+        a, b = seg[i, 0], seg[i, 1]
+        ax, ay, bx, by = pts[a, 0], pts[a, 1], pts[b, 0], pts[b, 1]
+        xmax = max(ax, bx)
+        for j in range(i + 1, m):
+            if xmin[j] > xmax:
+                break
+            c, d = seg[j, 0], seg[j, 1]
+            if c == a or c == b or d == a or d == b:
+                continue
+            cx, cy, dx, dy = pts[c, 0], pts[c, 1], pts[d, 0], pts[d, 1]
+            if max(cy, dy) < min(ay, by) or min(cy, dy) > max(ay, by):
+                continue
+            o1 = _orient(ax, ay, bx, by, cx, cy)
+            o2 = _orient(ax, ay, bx, by, dx, dy)
+            o3 = _orient(cx, cy, dx, dy, ax, ay)
+            o4 = _orient(cx, cy, dx, dy, bx, by)
+            if o1 * o2 > 0.0 or o3 * o4 > 0.0:
+                continue
+            den = o1 - o2
+            if den == 0.0:  # on one line: where they overlap, the nearer end inside both
+                continue
+            t = o1 / den
+            out.append((cx + t * (dx - cx), cy + t * (dy - cy)))
+    res = np.empty((len(out), 2))
+    for k in range(len(out)):
+        res[k, 0] = out[k][0]
+        res[k, 1] = out[k][1]
+    return res

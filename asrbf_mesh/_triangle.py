@@ -17,6 +17,8 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from . import _holes_kernels as _hk
+
 __all__ = ["delaunay", "triangulate"]
 
 
@@ -34,8 +36,10 @@ def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarra
     """
     import triangle
 
-    pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
-    seg = np.ascontiguousarray(seg, dtype=np.int64).reshape(-1, 2)
+    # copies: triangle's wrapper takes no read-only buffer (np.frombuffer's: it raised,
+    # and the input got no triangle)
+    pts = np.array(pts, dtype=np.float64, order="C").reshape(-1, 2)
+    seg = np.array(seg, dtype=np.int64, order="C").reshape(-1, 2)
     none = np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2))
     if not np.isfinite(pts).all():
         raise ValueError("triangulate: points must be finite")
@@ -50,12 +54,17 @@ def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarra
         slot = np.full(n, -1, dtype=np.int64)
         slot[keep] = np.arange(len(keep))
         pts, seg = pts[keep], slot[first[seg]]
-    seg = seg[seg[:, 0] != seg[:, 1]]
+    seg = _once_each(seg[seg[:, 0] != seg[:, 1]], n)  # a segment twice loops forever
     if len(seg):
-        key = np.sort(seg, axis=1)
-        _, once = np.unique(key[:, 0] * n + key[:, 1], return_index=True)
-        if len(once) < len(seg):  # a segment given twice also loops forever
-            seg = seg[np.sort(once)]
+        # a point within rounding of a segment's inside (not on it, to triangle's exact
+        # tests) made it insert a crossing next to that point and loop forever (a fold's
+        # rim closed by its chord, a synthetic bunny view punched with seed 69): the
+        # segment is split at the point, as triangle splits one through a point exactly
+        tol = _SAME_POINT * float(np.ptp(pts, axis=0).max())
+        seg = _split_at_touching(pts, seg, tol, n)
+        cross = _hk.crossings(pts, seg)
+        if len(cross) > 1 and _any_close(cross, tol):  # crossings at one point: the same
+            return none[0], cross
         data, switches = {"vertices": pts, "segments": seg}, flags
     else:  # no constraint left: the points' own (convex hull) triangulation
         data, switches = {"vertices": pts}, flags.replace("p", "").replace("c", "")
@@ -73,6 +82,40 @@ def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarra
 
 
 _STDOUT_LOCK = threading.Lock()
+
+
+def _once_each(seg: np.ndarray, n: int) -> np.ndarray:
+    """Return the segments (m, 2) without repeats (either way round), in their order."""
+    if len(seg) < 2:
+        return seg
+    key = np.sort(seg, axis=1)
+    _, once = np.unique(key[:, 0] * n + key[:, 1], return_index=True)
+    return seg[np.sort(once)] if len(once) < len(seg) else seg
+
+
+def _split_at_touching(pts: np.ndarray, seg: np.ndarray, tol: float, n: int) -> np.ndarray:
+    """Split each segment at the points within ``tol`` of its inside, in their order."""
+    at, v, t = _hk.touching(pts, seg, tol)
+    if len(at) == 0:
+        return seg
+    keep = np.ones(len(seg), dtype=bool)
+    keep[at] = False
+    parts = [seg[keep]]
+    order = np.lexsort((t, at))
+    at, v = at[order], v[order]
+    starts = np.flatnonzero(np.r_[True, at[1:] != at[:-1]])
+    for lo, hi in zip(starts, np.r_[starts[1:], len(at)], strict=True):
+        chain = np.r_[seg[at[lo], 0], v[lo:hi], seg[at[lo], 1]]
+        parts.append(np.column_stack([chain[:-1], chain[1:]]))
+    out = np.concatenate(parts)
+    return _once_each(out[out[:, 0] != out[:, 1]], n)
+
+
+def _any_close(p: np.ndarray, tol: float) -> bool:
+    """Whether two of the points (k, 2) lie within ``tol`` of each other."""
+    from scipy.spatial import cKDTree
+
+    return bool(cKDTree(p).query_pairs(tol, output_type="ndarray").size)
 
 
 def _flush_c_streams() -> None:
