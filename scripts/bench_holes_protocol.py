@@ -39,6 +39,24 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _bench_common import BUNNIES, label, machine, scans, table, write_section  # noqa: E402
 
+#: A case still running after this many seconds is stopped (SIGALRM ends its worker) and
+#: reported with the crashes: a native library looping forever (triangle did, on a
+#: synthetic view punched with seed 69) would otherwise hold the campaign for ever. The
+#: slowest cases take about 30 s.
+CASE_SECONDS = 600
+
+
+def _guarded(fn, c: tuple) -> dict:
+    """Run ``fn(c)`` in a worker that SIGALRM ends after :data:`CASE_SECONDS`."""
+    import signal
+
+    signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the default action ends the process
+    signal.alarm(CASE_SECONDS)
+    try:
+        return fn(c)
+    finally:
+        signal.alarm(0)
+
 
 def _case(args: tuple[str, int, bool, str, bool]) -> dict:
     """One punched case, in a worker process: fill, report, score every method."""
@@ -160,7 +178,7 @@ def run(names: list[str], seeds: list[int], poisson: bool, pieces: str, workers:
     todo = list(cases)
     while todo:
         with cf.ProcessPoolExecutor(workers, initializer=_init, initargs=(names,)) as ex:
-            futures = {ex.submit(fn, c): c for c in todo}
+            futures = {ex.submit(_guarded, fn, c): c for c in todo}
             todo = []
             broken = False
             for fut in cf.as_completed(futures):
@@ -180,9 +198,10 @@ def run(names: list[str], seeds: list[int], poisson: bool, pieces: str, workers:
                 for c in todo:
                     with cf.ProcessPoolExecutor(1, initializer=_init, initargs=(names,)) as one:
                         try:
-                            done.append(one.submit(fn, c).result())
+                            done.append(one.submit(_guarded, fn, c).result())
                         except cf.process.BrokenProcessPool:
-                            bad.append((c[0], c[1], "CRASH (worker died)"))
+                            bad.append((c[0], c[1], "CRASH (worker died, or ran over "
+                                                    f"{CASE_SECONDS} s)"))
                         except Exception as exc:  # noqa: BLE001
                             bad.append((c[0], c[1], f"raised {type(exc).__name__}: {exc}"))
                 todo = []
