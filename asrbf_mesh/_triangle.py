@@ -29,10 +29,14 @@ def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarra
     wrapper on input it cannot take: points all on one line (SIGSEGV), an empty segment
     list with the ``p`` switch (IndexError; a rim whose every edge crossed another), fewer
     than three points; copies of a point (exact, or within 1e-9 of the extent) joined by
-    segments, or a segment given twice (an endless loop). Those get no triangle here,
-    copies of a point are passed once (triangles use the first copy), and zero-length and
-    repeated segments are dropped; segments must index the points. Input triangle still
-    refuses (it raises) gets no triangle either.
+    segments, or a segment given twice (an endless loop), a point within rounding of a
+    segment's inside but off it to triangle's exact tests (it inserts the crossings next
+    to that point: an endless loop). Those get no triangle here, copies of a point are
+    passed once (triangles use the first copy), zero-length and repeated segments are
+    dropped, a segment is split at each point within 1e-9 of the extent of its inside,
+    and segments crossing within that distance of another crossing get no triangle (the
+    crossings are returned as the vertices triangle would add); segments must index the
+    points. Input triangle still refuses (it raises) gets no triangle either.
     """
     import triangle
 
@@ -63,7 +67,7 @@ def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarra
         tol = _SAME_POINT * float(np.ptp(pts, axis=0).max())
         seg = _split_at_touching(pts, seg, tol, n)
         cross = _hk.crossings(pts, seg)
-        if len(cross) > 1 and _any_close(cross, tol):  # crossings at one point: the same
+        if len(cross) > 1 and _any_close(cross, tol):  # crossings that near: the same
             return none[0], cross
         data, switches = {"vertices": pts, "segments": seg}, flags
     else:  # no constraint left: the points' own (convex hull) triangulation
