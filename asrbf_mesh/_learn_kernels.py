@@ -520,6 +520,8 @@ def _make_run_steps(update: int, prune_mode: int, decay: int):
             # it saw closer than that is the nearest of all (the ring search only otherwise)
             if near >= 0 and near_d2 < near_safe:
                 dist = np.sqrt(near_d2)
+            elif st[ST_K] == 0:  # no centre: the ring search visits every cell (a Kinect
+                near, dist = -1, np.inf  # piece with no neuron: 43,012 steps in 2.4 s)
             else:
                 near, dist = _nearest(x, y, W, cf, ci, c_head, c_nxt)
             grow = dist > D and abs(r) > E and rms > EW
