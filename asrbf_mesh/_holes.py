@@ -431,18 +431,20 @@ def _open_after_all(holes: list[Hole], infos: list[HoleInfo], before: list[HoleI
                 reason=before[i].reason or f"{n_open} rim edges could not be closed")
 
 
-def _closed_after_all(clashed: dict[int, np.ndarray], infos: list[HoleInfo],
+def _closed_after_all(partial: dict[int, np.ndarray], infos: list[HoleInfo],
                       still_open: np.ndarray) -> None:
-    """Mark filled the holes whose dropped triangles left no gap (updates ``infos``).
+    """Mark filled the holes whose partial patch left no gap at the end (updates ``infos``).
 
-    The triangles :func:`_agree_with_scan` drops often leave nothing open: they lay over
-    triangles the scan or the patch already has (a layer's patch beside a fold), or would
-    have closed an edge of the outer border, which stays open anyway (bun180 punched with
-    seed 5: 4 triangles dropped, every rim edge of its hole shared by two faces). A hole
-    is filled when none of its rim edges and none of its patch's edges (``clashed``: their
+    A patch is partial when triangles were dropped or it missed rim edges. The triangles
+    :func:`_agree_with_scan` drops often leave nothing open: they lay over triangles the
+    scan or the patch already has (a layer's patch beside a fold), or would have closed an
+    edge of the outer border, which stays open anyway (bun180 punched with seed 5: 4
+    triangles dropped, every rim edge of its hole shared by two faces); rim edges a patch
+    missed the loop stage may close (the steep side of a synthetic cylinder). A hole is
+    filled when none of its rim edges and none of its patch's edges (``partial``: their
     keys) is still open (``still_open``: :func:`_still_open`).
     """
-    for i, edge_keys in clashed.items():
+    for i, edge_keys in partial.items():
         if not infos[i].filled and not _in_sorted(edge_keys, still_open).any():
             infos[i] = dataclasses.replace(infos[i], filled=True, reason=None)
 
@@ -552,7 +554,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     new_tris: list[np.ndarray] = []
     infos: list[HoleInfo] = []
     rims: list[set[int]] = []
-    clashed: dict[int, np.ndarray] = {}  # info index -> rim and patch edge keys
+    partial: dict[int, np.ndarray] = {}  # info index -> rim and patch edge keys
     n_base = len(scan.points)
     n_new = 0
     todo = [i for i, h in enumerate(holes) if limit is None or h.size <= limit]
@@ -581,7 +583,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
             reason = (f"{clash} triangles would have run against the scan's orientation or "
                       "given a scan edge a third face")
         if reason is not None:  # judged by what is still open after the loop stage
-            clashed[len(infos)] = np.r_[_rim_keys_of(h.edges), _edge_keys(placed)]
+            partial[len(infos)] = np.r_[_rim_keys_of(h.edges), _edge_keys(placed)]
         if len(tris) == 0:
             infos.append(HoleInfo(**base, filled=False, reason=reason))
             continue
@@ -614,8 +616,8 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
                                                   hole_keys, *loop_args, only=hole_keys)
         still_open = _still_open(all_faces, outer)
     _open_after_all(holes, infos, before, still_open)
-    if clashed:
-        _closed_after_all(clashed, infos, still_open)
+    if partial:
+        _closed_after_all(partial, infos, still_open)
     quality = np.r_[np.zeros(n_base), np.ones(len(vertices) - n_base)]
     mesh = Mesh(vertices, all_faces, vertex_quality=quality)
     border_edges = sum(len(loop) for loop in outer)
