@@ -66,7 +66,7 @@ from ._hole_close import (
     _rim_keys_of,
     _winds_as_hole,
 )
-from ._hole_find import Hole, boundary_edges, find_holes
+from ._hole_find import Hole, boundary_edges, find_holes, usable_faces
 from ._hole_layers import fill_layers
 from ._hole_patch import BLENDS, Ctx, Patch, fill_single
 from ._mesh import Mesh, Scan
@@ -245,25 +245,18 @@ def _loop_job(state: tuple[np.ndarray, np.ndarray, cKDTree],
     return fill_loop(loop, vertices, step, scan_points, tree)
 
 
-def _with_area(faces: np.ndarray | None, source: str | None) -> np.ndarray | None:
-    """Return the faces but those that repeat a vertex (with a warning saying how many).
-
-    A face ``[a, b, a]`` covers nothing, and its edges ``a-b`` and ``b-a`` made the edge
-    beside a missing triangle look shared: the hole there was never found (a crop of
-    the face map with 2 % of its faces so spoiled: 108 of 792 holes found, 2 filled;
-    with them dropped, 792 of 792).
-    """
+def _usable(faces: np.ndarray | None, source: str | None) -> np.ndarray | None:
+    """Return the faces the fill can use (:func:`usable_faces`), with a warning on fixes."""
     if faces is None or len(faces) == 0:
         return faces
-    bad = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) \
-        | (faces[:, 0] == faces[:, 2])
-    if not bad.any():
-        return faces
-    n = int(bad.sum())
-    warnings.warn(f"{source or 'scan'}: {n:,} face{'s' if n > 1 else ''} with a repeated "
-                  f"vertex left out (no area; the holes beside them are filled)",
-                  stacklevel=3)
-    return faces[~bad]
+    faces, fixes = usable_faces(faces)
+    said = [f"{n:,} {what}" for what, n in (
+        ("faces with a repeated vertex left out", fixes["repeated"]),
+        ("copies of faces left out", fixes["copies"]),
+        ("faces turned to agree with their neighbours", fixes["turned"])) if n]
+    if said:
+        warnings.warn(f"{source or 'scan'}: {', '.join(said)}", stacklevel=3)
+    return faces
 
 
 def _as_scan(scan: Any) -> Scan:
@@ -515,8 +508,10 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     Returns
     -------
     FillResult
-        The repaired mesh (scan vertices and faces first, untouched, but for faces
-        that repeat a vertex: dropped, with a warning) and a report
+        The repaired mesh (scan vertices and faces first, untouched but for the
+        fixes of :func:`~asrbf_mesh._hole_find.usable_faces`: faces that repeat a vertex
+        or another face left out, faces against their neighbours turned; a warning
+        says how many) and a report
         of every hole: filled, or skipped with a reason. The outer border is never
         filled and is not counted as a hole.
 
@@ -550,7 +545,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     xy = np.ascontiguousarray(local[:, :2])
     depth = local[:, 2]
     spacing = sampling_spacing(xy)
-    faces = _with_area(scan.faces, scan.source)
+    faces = _usable(scan.faces, scan.source)
     if faces is None or len(faces) == 0:
         faces = point_cloud_faces(xy, spacing)
     if len(faces) == 0:

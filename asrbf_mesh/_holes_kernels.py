@@ -226,6 +226,96 @@ def _once(e, n):
     return out
 
 
+def face_faults(faces: np.ndarray) -> tuple[np.ndarray, int]:
+    """Find copies among (F, 3) faces of distinct vertices, and edges whose faces disagree.
+
+    Returns whether each face repeats the vertices of an earlier one (any order), and
+    how many edges shared by exactly two faces (copies counted) run the same way in both.
+    Faces bucketed by their smallest vertex, half-edges by their smaller one (counting
+    sorts, as :func:`once`): linear in F (``np.unique`` over keys took 0.14 s on the face
+    map's 166 thousand faces, 0.40 s on a Kinect frame's 391 thousand).
+    """
+    f = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(f) == 0:
+        return np.zeros(0, dtype=bool), 0
+    if f.min() < 0:
+        raise ValueError("face_faults: vertex ids must be >= 0")
+    copy, turned = _face_faults(f, int(f.max()) + 1)
+    return copy, int(turned)
+
+
+@njit(cache=True, nogil=True)
+def _buckets(key, n):
+    """Sort ``key`` (values in [0, n)) by counting: (bucket starts, entries in order)."""
+    start = np.zeros(n + 1, np.int64)
+    for t in range(key.shape[0]):
+        start[key[t] + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    fill = start[:n].copy()
+    entry = np.empty(key.shape[0], np.int64)
+    for t in range(key.shape[0]):
+        entry[fill[key[t]]] = t
+        fill[key[t]] += 1
+    return start, entry
+
+
+@njit(cache=True, nogil=True)
+def _face_faults(f, n):
+    m = f.shape[0]
+    lo = np.empty(m, np.int64)
+    mid = np.empty(m, np.int64)
+    hi = np.empty(m, np.int64)
+    for t in range(m):
+        a, b, c = f[t, 0], f[t, 1], f[t, 2]
+        lo[t] = min(a, min(b, c))
+        hi[t] = max(a, max(b, c))
+        mid[t] = a + b + c - lo[t] - hi[t]
+    start, entry = _buckets(lo, n)
+    copy = np.zeros(m, np.bool_)
+    for v in range(n):
+        for i in range(start[v], start[v + 1]):
+            t = entry[i]  # entries of a bucket in face order: the first copy stays
+            for j in range(start[v], i):
+                u = entry[j]
+                if mid[u] == mid[t] and hi[u] == hi[t]:
+                    copy[t] = True
+                    break
+    # half-edges: (from, to) of face t's edge k, bucketed by the smaller end
+    e_from = np.empty(3 * m, np.int64)
+    e_to = np.empty(3 * m, np.int64)
+    small = np.empty(3 * m, np.int64)
+    for t in range(m):
+        for k in range(3):
+            a, b = f[t, k], f[t, (k + 1) % 3]
+            e_from[3 * t + k] = a
+            e_to[3 * t + k] = b
+            small[3 * t + k] = min(a, b)
+    start, entry = _buckets(small, n)
+    turned = 0
+    for v in range(n):
+        for i in range(start[v], start[v + 1]):
+            p = entry[i]
+            big = max(e_from[p], e_to[p])
+            count = 0
+            first = -1
+            for j in range(start[v], start[v + 1]):
+                q = entry[j]
+                if max(e_from[q], e_to[q]) == big:
+                    count += 1
+                    if first < 0:
+                        first = j
+            # each shared edge once (at its first half-edge), when exactly two share it
+            if count == 2 and first == i:
+                for j in range(i + 1, start[v + 1]):
+                    q = entry[j]
+                    if max(e_from[q], e_to[q]) == big:
+                        if e_from[q] == e_from[p]:
+                            turned += 1
+                        break
+    return copy, turned
+
+
 def distance_to_false(mask: np.ndarray) -> np.ndarray:
     """Euclidean distance (in cells) of each cell of a 2D bool raster to its nearest False.
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ._mesh import Mesh
@@ -49,9 +51,19 @@ def k_harmonic(V: np.ndarray, F: np.ndarray, b: np.ndarray, bc: np.ndarray, k: i
     return np.asarray(igl.harmonic(V, F, b, bc, int(k)), dtype=np.float64)
 
 
-def orient_faces(faces: np.ndarray) -> np.ndarray:
-    """Faces flipped so that each orientable connected patch turns one way (libigl's BFS)."""
+def orient_faces(faces: np.ndarray, components: bool = False) -> Any:
+    """Faces flipped so that each orientable connected patch turns one way (libigl's BFS).
+
+    With ``components``, also each face's patch id. The faces must be (F, 3) indices
+    >= 0 (a ``ValueError`` otherwise, before the library sees them).
+    """
     import igl
 
-    out, _ = igl.bfs_orient(np.ascontiguousarray(faces, dtype=np.int64))
-    return np.asarray(out, dtype=np.int64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    if f.ndim != 2 or f.shape[1] != 3 or (f.size and f.min() < 0):
+        raise ValueError("orient_faces: faces must be (F, 3) vertex indices")
+    if len(f) == 0:
+        return (f.copy(), np.zeros(0, np.int64)) if components else f.copy()
+    out, comp = igl.bfs_orient(f)
+    out = np.asarray(out, dtype=np.int64)
+    return (out, np.asarray(comp, dtype=np.int64)) if components else out

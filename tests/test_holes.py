@@ -120,7 +120,7 @@ def test_faces_repeating_a_vertex_are_left_out_and_the_holes_beside_them_filled(
         if all(np.linalg.norm(centres[f] - centres[g]) > 4.0 for g in pick):
             pick.append(int(f))
     spoiled[pick, 2] = spoiled[pick, 0]
-    with pytest.warns(UserWarning, match=f"{len(pick)} faces with a repeated vertex"):
+    with pytest.warns(UserWarning, match=f"{len(pick)} faces with a repeated vertex left out$"):
         res = fill_holes(am.Scan(scan.points, spoiled), seed=0, progress=False)
     assert res.holes_found == len(pick) and res.holes_filled == len(pick)
     assert not np.any(res.mesh.faces[:, 0] == res.mesh.faces[:, 2])  # the spoiled ones
@@ -128,6 +128,26 @@ def test_faces_repeating_a_vertex_are_left_out_and_the_holes_beside_them_filled(
     assert counts.max() == 2  # manifold
     border = max(boundary_loops(res.mesh.faces), key=len)
     assert int((counts == 1).sum()) == len(border)  # only the outer border open
+
+
+def test_copied_and_turned_faces_are_mended_and_every_hole_filled() -> None:
+    scan = grid_scan(franke)
+    p = punch_holes(scan, count=3, radius_rel=(0.05, 0.08), seed=1)
+    rng = np.random.default_rng(0)
+    faces = np.array(p.scan.faces)
+    turn = rng.random(len(faces)) < 0.05
+    faces[turn] = faces[turn][:, [0, 2, 1]]  # against their neighbours
+    copies = rng.choice(len(faces), 40, replace=False)
+    spoiled = np.vstack([faces, faces[copies][:, [1, 2, 0]]])  # the same faces again
+    with pytest.warns(UserWarning, match=f"40 copies of faces left out, {turn.sum()} faces "
+                                         "turned to agree with their neighbours"):
+        res = fill_holes(am.Scan(p.scan.points, spoiled), seed=0, progress=False)
+    assert res.holes_found == 3 and res.holes_filled == 3
+    m = res.mesh
+    np.testing.assert_array_equal(m.faces[:len(faces)], p.scan.faces)  # mended
+    _, counts = edges_count(m.faces)
+    assert counts.max() == 2 and np.all(signed_areas(m) > 0)
+    assert len(boundary_loops(m.faces)) == 1  # only the outer border open
 
 
 def test_max_hole_size_skips_with_a_reason() -> None:

@@ -27,6 +27,30 @@ def test_once_counts_pairs_either_way_round() -> None:
         hk.once(np.array([[0, -1]]))
 
 
+def test_face_faults_find_copies_and_edges_whose_faces_disagree() -> None:
+    from collections import Counter
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        f = rng.integers(0, int(rng.integers(3, 40)), (int(rng.integers(1, 120)), 3))
+        f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+        copy, turned = hk.face_faults(f)
+        seen: set = set()
+        want = []
+        for row in f.tolist():
+            want.append(tuple(sorted(row)) in seen)
+            seen.add(tuple(sorted(row)))
+        np.testing.assert_array_equal(copy, want)  # the first of each set stays
+        und: Counter = Counter()
+        way: Counter = Counter()
+        for a, b, c in f.tolist():
+            for x, y in ((a, b), (b, c), (c, a)):
+                und[min(x, y), max(x, y)] += 1
+                way[x, y] += 1
+        assert turned == sum(1 for (x, y), n in und.items()
+                             if n == 2 and (way[x, y] == 2 or way[y, x] == 2))
+
+
 def test_distance_to_false_is_scipys_euclidean_transform() -> None:
     rng = np.random.default_rng(1)
     for _ in range(150):
