@@ -208,8 +208,19 @@ def _residual_spline(ctx: Ctx, ring: np.ndarray, fnet: Network, centre: np.ndarr
     """Thin-plate spline of the scan's residual ``z - f`` on the ``ring`` points."""
     ring = _thin_out(ring, ctx.xy, _RING_MAX)
     res = ctx.depth[ring] - fnet.evaluate(ctx.xy[ring])
-    spline = RBFInterpolator((ctx.xy[ring] - centre) / size, res, kernel="thin_plate_spline",
-                             neighbors=None)
+    # points at one xy (a scan's copies of a vertex, coordinates rounded coarser than
+    # its spacing) made the system singular: one point each, their mean residual
+    xy, inv = np.unique(ctx.xy[ring], axis=0, return_inverse=True)
+    if len(xy) < len(ring):
+        res = np.bincount(inv.ravel(), weights=res) / np.bincount(inv.ravel())
+    else:  # as they came (the same solve, bit for bit, as before)
+        xy = ctx.xy[ring]
+    try:
+        spline = RBFInterpolator((xy - centre) / size, res, kernel="thin_plate_spline",
+                                 neighbors=None)
+    except (np.linalg.LinAlgError, ValueError):  # too few points, or all on one line
+        mean = float(res.mean()) if len(res) else 0.0
+        return lambda q: np.full(len(q), mean)
     return lambda q: spline((q - centre) / size)
 
 
