@@ -33,27 +33,35 @@ def usable_faces(faces: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
     ``a-b`` and ``b-a`` make the edge beside a missing triangle look shared, so the hole
     there is never found) and copies of a face (the same three vertices, in any order:
     the first is kept; a copy gives each of its edges two more faces, so a hole's rim
-    looks shared). Turned (``[a, c, b]``; every other face as given): faces against
+    looks shared), and fins (a face on an edge of more than two faces whose two other
+    edges have no other face: the last ones, while the edge has more than two).
+    Turned (``[a, c, b]``; every other face as given): faces against
     their neighbours, where an edge shared by two faces runs the same way in both (a
     patch cannot then join the rim the scan's way); each connected patch is turned one
     way (libigl's BFS, :func:`~asrbf_mesh._igl.orient_faces`), then as most of its
     faces were. A crop of the face map with 5 holes punched: with 2 % of its faces
     copied, 2 and 0 of them filled (two spoilings); 2 % turned, 1 and 0; half turned, 0
     and 0; with these fixes 5 of 5 each time. Keys ``"repeated"``, ``"copies"``,
-    ``"turned"``; the faces come back as given when all are 0 (checked in linear
+    ``"fins"``, ``"turned"``; the faces come back as given when all are 0 (checked in linear
     time, :func:`~asrbf_mesh._holes_kernels.face_faults`: 0.02 s on the face map).
     """
     f = np.asarray(faces, dtype=np.int64)
-    fixes = {"repeated": 0, "copies": 0, "turned": 0}
+    fixes = {"repeated": 0, "copies": 0, "fins": 0, "turned": 0}
     bad = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
     if bad.any():
         fixes["repeated"] = int(bad.sum())
         f = f[~bad]
-    copy, turned = _hk.face_faults(f)
+    copy, turned, over = _hk.face_faults(f)
     if copy.any():
         fixes["copies"] = int(copy.sum())
         f = f[~copy]
-        turned = _hk.face_faults(f)[1]
+        _, turned, over = _hk.face_faults(f)
+    if over:
+        fin = _fins(f)
+        if fin.any():
+            fixes["fins"] = int(fin.sum())
+            f = f[~fin]
+            turned = _hk.face_faults(f)[1]
     if turned == 0:
         return f, fixes
     from ._igl import orient_faces
@@ -71,6 +79,30 @@ def usable_faces(faces: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         fixes["turned"] = int(flip.sum())
         f = out
     return f, fixes
+
+
+def _fins(f: np.ndarray) -> np.ndarray:
+    """Whether each face is a fin: on an edge of more than two faces, its others free.
+
+    A fin's two other edges have no other face; on each edge the last fins (in face
+    order) go while it has more than two faces.
+    """
+    n = int(f.max()) + 1
+    e = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2), axis=2)
+    key = e[..., 0] * n + e[..., 1]
+    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    uses = count[inv.reshape(-1, 3)]
+    free = (uses == 1).sum(axis=1) == 2
+    full = uses.max(axis=1) > 2
+    cand = np.flatnonzero(free & full)
+    edge = inv.reshape(-1, 3)[cand, np.argmax(uses[cand], axis=1)]
+    order = np.lexsort((-cand, edge))  # per edge, the last faces first
+    edge, cand = edge[order], cand[order]
+    first = np.r_[0, np.flatnonzero(np.diff(edge)) + 1]
+    rank = np.arange(len(edge)) - np.repeat(first, np.diff(np.r_[first, len(edge)]))
+    out = np.zeros(len(f), dtype=bool)
+    out[cand[rank < count[edge] - 2]] = True
+    return out
 
 
 def used_once(edges: np.ndarray) -> np.ndarray:

@@ -253,6 +253,7 @@ def _usable(faces: np.ndarray | None, source: str | None) -> np.ndarray | None:
     said = [f"{n:,} {what}" for what, n in (
         ("faces with a repeated vertex left out", fixes["repeated"]),
         ("copies of faces left out", fixes["copies"]),
+        ("fins left out (faces on an edge of more than two)", fixes["fins"]),
         ("faces turned to agree with their neighbours", fixes["turned"])) if n]
     if said:
         warnings.warn(f"{source or 'scan'}: {', '.join(said)}", stacklevel=3)

@@ -10,6 +10,7 @@ import json
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -66,53 +67,32 @@ DEFECT_CHILD = textwrap.dedent("""
     import json, sys, warnings
     import numpy as np
     import asrbf_mesh as am
+    sys.path.insert(0, sys.argv[2])
+    from bench_mesh_defects import crop, spoil  # the benchmark's crop, holes and defects
     warnings.simplefilter("ignore")
-    kind = sys.argv[1]
-    scan = am.load_scan(am.face_map_path())
-    P, F = scan.points, scan.faces
-    mid = np.median(P[:, :2], axis=0)
-    keep = np.all(np.abs(P[:, :2] - mid) < 30.0, axis=1)  # a 60 x 60 mm crop
-    F = F[keep[F].all(axis=1)]
-    used = np.unique(F)
-    new = np.full(len(P), -1)
-    new[used] = np.arange(len(used))
-    P, F = P[used], new[F]
-    c = P[F].mean(axis=1)[:, :2] - np.median(P[:, :2], axis=0)
-    disks = [(-12, -10, 4), (10, 8, 5), (0, 15, 3), (12, -12, 4), (-10, 12, 2.5)]
-    F = F[~np.any([np.hypot(*(c - [x, y]).T) < r for x, y, r in disks], axis=0)]
-    rng = np.random.default_rng(0)
-    pick = rng.choice(len(F), len(F) // 50, replace=False)
-    if kind == "rounded":  # coordinates rounded coarser than the spacing (0.4 mm)
-        P = np.round(P / 0.5) * 0.5
-    elif kind == "copies":
-        F = np.vstack([F, F[pick][:, [1, 2, 0]]])
-    elif kind == "turned":
-        F[pick] = F[pick][:, [0, 2, 1]]
-    elif kind == "repeated":
-        F[pick, 2] = F[pick, 0]
-    elif kind == "fins":  # a third face on some edges
-        P = np.vstack([P, P[F[pick, 0]] + rng.normal(0.0, 1.0, (len(pick), 3))])
-        F = np.vstack([F, np.c_[F[pick, :2], len(P) - len(pick) + np.arange(len(pick))]])
+    P, F = spoil(sys.argv[1], *crop(), 0)
     res = am.fill_holes(am.Scan(P, F), seed=0, progress=False)
     print(json.dumps({"found": res.holes_found, "filled": res.holes_filled,
                       "reasons": [h.reason for h in res.holes if not h.filled],
                       "finite": bool(np.isfinite(res.mesh.vertices).all()),
                       "kept": bool(np.array_equal(res.mesh.vertices[:len(P)], P))}))
 """)
+SCRIPTS = str(Path(__file__).resolve().parents[1] / "scripts")
 
 
-@pytest.mark.parametrize("kind", ["rounded", "copies", "turned", "repeated", "fins"])
+@pytest.mark.parametrize("kind", ["rounded-1.25", "copies", "turned", "repeated", "fins",
+                                  "cracks", "unwelded"])
 def test_fill_holes_takes_mesh_defects_without_crash(kind: str) -> None:
     # rounded: points at one xy made the residual spline's system singular (LinAlgError
-    # out of fill_holes); copies, turned and repeated faces hid or spoiled the holes
-    proc = subprocess.run([sys.executable, "-c", DEFECT_CHILD, kind],
+    # out of fill_holes); copies, fins, turned and repeated faces hid or spoiled the holes
+    proc = subprocess.run([sys.executable, "-c", DEFECT_CHILD, kind, SCRIPTS],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr[-2000:]}"
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["finite"] and out["kept"] and out["found"] >= 5
     assert len(out["reasons"]) == out["found"] - out["filled"]
     assert all(isinstance(r, str) and r for r in out["reasons"])
-    if kind in ("copies", "turned", "repeated"):  # mended: every hole filled
+    if kind != "rounded-1.25":  # mended (or zero-width holes): every hole filled
         assert out["filled"] == out["found"]
 
 

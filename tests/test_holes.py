@@ -150,6 +150,21 @@ def test_copied_and_turned_faces_are_mended_and_every_hole_filled() -> None:
     assert len(boundary_loops(m.faces)) == 1  # only the outer border open
 
 
+def test_fins_go_while_their_edge_has_more_than_two_faces() -> None:
+    from asrbf_mesh._hole_find import usable_faces
+
+    # two triangles on edge 0-1, two fins on it (4 faces), and one fin on a border edge
+    faces = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [1, 0, 5], [2, 1, 6]])
+    kept, fixes = usable_faces(faces)
+    np.testing.assert_array_equal(kept, faces[[0, 1, 4]])  # the edge keeps two faces
+    assert fixes["fins"] == 2
+    # an edge of three faces none of which is a fin keeps all three
+    fan = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 1, 5], [3, 0, 6], [4, 1, 7],
+                    [2, 5, 8], [3, 6, 9], [4, 7, 10]])
+    fan = np.vstack([fan, [[5, 1, 11], [6, 0, 12], [7, 1, 13]]])
+    assert usable_faces(fan)[1]["fins"] == 0
+
+
 def test_max_hole_size_skips_with_a_reason() -> None:
     scan = grid_scan(paraboloid)
     p = punch_holes(scan, count=2, radius_rel=(0.04, 0.09), seed=3)

@@ -34,7 +34,7 @@ def test_face_faults_find_copies_and_edges_whose_faces_disagree() -> None:
     for _ in range(200):
         f = rng.integers(0, int(rng.integers(3, 40)), (int(rng.integers(1, 120)), 3))
         f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
-        copy, turned = hk.face_faults(f)
+        copy, turned, over = hk.face_faults(f)
         seen: set = set()
         want = []
         for row in f.tolist():
@@ -49,6 +49,7 @@ def test_face_faults_find_copies_and_edges_whose_faces_disagree() -> None:
                 way[x, y] += 1
         assert turned == sum(1 for (x, y), n in und.items()
                              if n == 2 and (way[x, y] == 2 or way[y, x] == 2))
+        assert over == sum(1 for n in und.values() if n > 2)
 
 
 def test_distance_to_false_is_scipys_euclidean_transform() -> None:
