@@ -41,7 +41,8 @@ def usable_faces(faces: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
     way (libigl's BFS, :func:`~asrbf_mesh._igl.orient_faces`), then as most of its
     faces were. A crop of the face map with 5 holes punched: with 2 % of its faces
     copied, 2 and 0 of them filled (two spoilings); 2 % turned, 1 and 0; half turned, 0
-    and 0; with these fixes 5 of 5 each time. Keys ``"repeated"``, ``"copies"``,
+    and 0; fins on 2 % of its edges, 0 and 1; with these fixes 5 of 5 each time
+    (``scripts/bench_mesh_defects.py``). Keys ``"repeated"``, ``"copies"``,
     ``"fins"``, ``"turned"``; the faces come back as given when all are 0 (checked in linear
     time, :func:`~asrbf_mesh._holes_kernels.face_faults`: 0.02 s on the face map).
     """

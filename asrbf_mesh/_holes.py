@@ -511,8 +511,8 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     FillResult
         The repaired mesh (scan vertices and faces first, untouched but for the
         fixes of :func:`~asrbf_mesh._hole_find.usable_faces`: faces that repeat a vertex
-        or another face left out, faces against their neighbours turned; a warning
-        says how many) and a report
+        or another face and fins left out, faces against their neighbours turned; a
+        warning says how many) and a report
         of every hole: filled, or skipped with a reason. The outer border is never
         filled and is not counted as a hole.
 
