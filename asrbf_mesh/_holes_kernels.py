@@ -200,21 +200,31 @@ def once(edges: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _once(e, n):
-    m = e.shape[0]
+def _buckets(key, n):
+    """Sort ``key`` (values in [0, n)) by counting: (bucket starts, entries in order)."""
     start = np.zeros(n + 1, np.int64)
-    for t in range(m):
-        start[min(e[t, 0], e[t, 1]) + 1] += 1
+    for t in range(key.shape[0]):
+        start[key[t] + 1] += 1
     for v in range(n):
         start[v + 1] += start[v]
     fill = start[:n].copy()
-    other = np.empty(m, np.int64)
-    owner = np.empty(m, np.int64)
+    entry = np.empty(key.shape[0], np.int64)
+    for t in range(key.shape[0]):
+        entry[fill[key[t]]] = t
+        fill[key[t]] += 1
+    return start, entry
+
+
+@njit(cache=True, nogil=True)
+def _once(e, n):
+    m = e.shape[0]
+    small = np.empty(m, np.int64)
+    big = np.empty(m, np.int64)
     for t in range(m):
-        a = min(e[t, 0], e[t, 1])
-        other[fill[a]] = max(e[t, 0], e[t, 1])
-        owner[fill[a]] = t
-        fill[a] += 1
+        small[t] = min(e[t, 0], e[t, 1])
+        big[t] = max(e[t, 0], e[t, 1])
+    start, entry = _buckets(small, n)
+    other = big[entry]  # in bucket order: each bucket's larger ends side by side
     out = np.zeros(m, np.bool_)
     for v in range(n):
         for i in range(start[v], start[v + 1]):
@@ -222,7 +232,7 @@ def _once(e, n):
             for j in range(start[v], start[v + 1]):
                 if other[j] == other[i]:
                     c += 1
-            out[owner[i]] = c == 1
+            out[entry[i]] = c == 1
     return out
 
 
@@ -243,22 +253,6 @@ def face_faults(faces: np.ndarray) -> tuple[np.ndarray, int, int]:
         raise ValueError("face_faults: vertex ids must be >= 0")
     copy, turned, over = _face_faults(f, int(f.max()) + 1)
     return copy, int(turned), int(over)
-
-
-@njit(cache=True, nogil=True)
-def _buckets(key, n):
-    """Sort ``key`` (values in [0, n)) by counting: (bucket starts, entries in order)."""
-    start = np.zeros(n + 1, np.int64)
-    for t in range(key.shape[0]):
-        start[key[t] + 1] += 1
-    for v in range(n):
-        start[v + 1] += start[v]
-    fill = start[:n].copy()
-    entry = np.empty(key.shape[0], np.int64)
-    for t in range(key.shape[0]):
-        entry[fill[key[t]]] = t
-        fill[key[t]] += 1
-    return start, entry
 
 
 @njit(cache=True, nogil=True)
