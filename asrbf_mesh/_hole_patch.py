@@ -264,7 +264,13 @@ def _residual_spline(ctx: Ctx, ring: np.ndarray, fnet: Network, centre: np.ndarr
 # r^2 log r + r^3: 0.1461 / 81.2 % (dev); the thin plate with a quadratic term: 0.1472 /
 # 82.8 % (dev); a linear kernel 0.189 (dev); the thin plate's mean with the network's
 # view-plane fill (below) 0.166-0.189 (dev, weights 3:1 and 1:1), with a harmonic fill
-# of the rim's depths 0.19-0.35 (views, weights 3:1 to 0:1).
+# of the rim's depths 0.19-0.35 (views, weights 3:1 to 0:1). A spline in tension (kernel
+# -(K0(t r) + log(t r)): the thin plate as t -> 0, a membrane as t grows; t per hole size)
+# in place of the thin plate, averaged with the cubic (a Python prototype, its t = 0 the
+# reference: views 70.2 % / 0.1660, dev 81.8 % / 0.1449): views t = 2, 5, 10: 70.6 / 70.9 /
+# 73.2 %, pooled 0.1655 / 0.1659 / 0.1709 (worst 0.498 at 10); dev t = 3, 6: 81.2 % /
+# 0.1459 and 81.2 % / 0.1490 (the face map 74 % with each); the best t of 0, 2, 5 per hole
+# (an oracle) 73.2 % of the views' holes.
 _CUBIC = 0.5
 _MIN_NZ = 0.15
 _FLAT = 0.5
