@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     for kind in args.defects:
         got = [run_case(kind, s) for s in args.seeds]
         bad = [g[0] for g in got if g[0].startswith(("crash", "hang"))]
-        exc = [g[3][0] for g in got if g[0] in ("exception", "non-finite")]
+        exc = [(g[3] or [g[0]])[0] for g in got if g[0] in ("exception", "non-finite")]
         errors = [g[3][0] for g in got if g[0] == "error"]
         found, filled = sum(g[1] for g in got), sum(g[2] for g in got)
         why = Counter(" ".join(r.split()[1:]) if r[:1].isdigit() else r
