@@ -29,7 +29,7 @@ network's on all five scans (face map: 696 neurons and E-bar 0.00191 against 781
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -40,7 +40,15 @@ from ._grid_knn import point_grid, spread
 from ._learn import MIN_POINTS, auto_d_min, learn_polished
 from ._piece import Piece
 from ._piece_map import PieceMap
-from ._polish import drop_idle, extend_and_solve, extend_normal, polish_weights, solve_and_drop
+from ._polish import (
+    DENSE_MAX,
+    GrownNormal,
+    appended_rows,
+    drop_idle,
+    extend_and_solve,
+    polish_weights,
+    solve_and_drop,
+)
 from ._segment import Segmentation, depth_quanta
 from ._validate import progress as progress_bar
 
@@ -352,7 +360,8 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     limit: float | np.ndarray = 0.0
     # the normal equations of the neurons so far, while they are the polish's extended
     # (dense); the new neurons' weights come from them (:func:`_appended_weights`)
-    normal = polished if polished is not None and isinstance(polished.ata, np.ndarray) \
+    normal = GrownNormal(polished.ata, polished.atz) if polished is not None \
+        and isinstance(polished.ata, np.ndarray) \
         and polished.ata.shape[0] == len(widths) + 1 else None
 
     def one_round(a0, centers, widths, weights, factor=1.0, res=None):
@@ -399,13 +408,16 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         near = np.linalg.norm(new - centers[cKDTree(centers).query(new)[1]], axis=1)
         sigma = np.maximum(cfg.psi * near, 0.5 * d_min)
         grown_c, grown_w = np.vstack([centers, new]), np.r_[widths, sigma]
+        if normal is not None and len(grown_w) >= DENSE_MAX:
+            normal = None  # too many for dense normal equations: the polish's path below
         if normal is not None and factor == 1.0:
-            # the new columns of the normal equations, over the rows under the new
+            # the new rows of the normal equations, over the points under the new
             # neurons: the last solve needs them, and they hold the local solve's
-            ata, atz = extend_normal(sub.xy, sub.z, normal, grown_c, grown_w,
-                                     np.r_[weights, np.zeros(len(sigma))], cfg.support)
-            normal = replace(normal, ata=ata, atz=atz)
-            a_new = _appended_weights(ata, atz, a0, weights, cfg.polish_ridge)
+            rows, atz = appended_rows(sub.xy, sub.z, grown_c, grown_w,
+                                      np.r_[weights, np.zeros(len(sigma))], cfg.support,
+                                      len(widths))
+            normal.append(rows, atz)
+            a_new = _appended_weights(rows, atz, a0, weights, cfg.polish_ridge)
         else:
             a_new = _local_weights(sub.xy, res, new, sigma, cfg)
         return grown_c, grown_w, np.r_[weights, a_new], len(picked)
@@ -427,7 +439,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         # the polish's normal equations extended by the new neurons' columns, solved,
         # and the neurons the network hardly needs dropped, from one dense inverse
         base = np.concatenate([[polished.a0], polished.weights, np.zeros(added)])
-        got = solve_and_drop(sub.xy, sub.z, normal.ata, normal.atz, a0, centers, widths,
+        got = solve_and_drop(sub.xy, sub.z, normal.matrix(), normal.atz, a0, centers, widths,
                              weights, cfg.support, cfg.polish_ridge, idle, base=base,
                              give_back=IDLE_GIVE_BACK, extra=_noise_budget(polished, quantum))
         if got is not None:
@@ -461,20 +473,21 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     return (pr.a0, pr.centers, pr.widths, pr.weights), added
 
 
-def _appended_weights(ata: np.ndarray, atz: np.ndarray, a0: float, weights: np.ndarray,
+def _appended_weights(rows: np.ndarray, atz: np.ndarray, a0: float, weights: np.ndarray,
                       ridge: float) -> np.ndarray:
     """Least-squares weights of the neurons appended after ``weights``, the others fixed.
 
-    From the extended normal equations (columns ``[a0, weights, appended]``): the
-    appended block ``B = A_n'A_n`` and ``A_n'r = A_n'z - A_n'A_o (a0, weights)``, ``r``
-    the residual under the old neurons; ridged as the polish. The same solution as
+    From the appended neurons' rows of the extended normal equations (``rows``: columns
+    ``[a0, weights, appended]``; ``atz``: theirs, :func:`~asrbf_mesh._polish.appended_rows`):
+    the appended block ``B = A_n'A_n`` and ``A_n'r = A_n'z - A_n'A_o (a0, weights)``,
+    ``r`` the residual under the old neurons; ridged as the polish. The same solution as
     :func:`_local_weights` on that residual, without a pass over the points.
     """
     from ._polish import _ridged, _solve_spd
 
     k = len(weights) + 1
-    rhs = atz[k:] - ata[k:, :k] @ np.concatenate([[a0], weights])
-    a = _solve_spd(_ridged(ata[k:, k:], ridge), rhs)
+    rhs = atz - rows[:, :k] @ np.concatenate([[a0], weights])
+    a = _solve_spd(_ridged(np.ascontiguousarray(rows[:, k:]), ridge), rhs)
     return np.where(np.isfinite(a), a, 0.0)
 
 

@@ -28,7 +28,8 @@ from ._blas import one_blas_thread
 from ._piece import _read_only, eval_grid, eval_unit
 
 __all__ = ["PolishResult", "polish_weights", "polish_weights_blocks", "polish_full",
-           "design_matrix", "extend_and_solve", "extend_normal", "solve_and_drop", "drop_idle"]
+           "design_matrix", "extend_and_solve", "extend_normal", "appended_rows", "GrownNormal",
+           "solve_and_drop", "drop_idle"]
 
 _SIGMA_RANGE = (1e-5, 2.0)
 _CENTRE_BOX = (-0.25, 1.25)
@@ -279,6 +280,10 @@ def extend_normal(xy: np.ndarray, z: np.ndarray, pr: PolishResult, centers: np.n
     m = len(widths) - k_old
     if m <= 0:
         return pr.ata, pr.atz
+    if isinstance(pr.ata, np.ndarray) and len(widths) + 1 <= DENSE_MAX:
+        grown = GrownNormal(pr.ata, pr.atz)
+        grown.append(*appended_rows(xy, z, centers, widths, weights, support, k_old))
+        return grown.matrix(), grown.atz
     rows = rows_under(xy, centers[k_old:], widths[k_old:], support)
     normal = _normal_under(xy, z, rows, centers, widths, weights, support, 1 + k_old)
     ata = normal.matrix()
@@ -291,6 +296,62 @@ def extend_normal(xy: np.ndarray, z: np.ndarray, pr: PolishResult, centers: np.n
                             shape=(len(widths) + 1,) * 2)
         ata = (old + ata).tocsr()
     return ata, np.concatenate([pr.atz, normal.atr[1 + k_old:]])
+
+
+def appended_rows(xy: np.ndarray, z: np.ndarray, centers: np.ndarray, widths: np.ndarray,
+                  weights: np.ndarray, support: float, k_old: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``(A'A, A'z)`` for the neurons after the first ``k_old`` (dense, no bias row).
+
+    ``(m, K + 1)`` and ``(m,)`` for the ``m`` appended neurons, over the points under
+    them: what :func:`extend_normal` adds to the normal equations of the first ``k_old``.
+    """
+    rows = rows_under(xy, centers[k_old:], widths[k_old:], support)
+    normal = _normal_under(xy, z, rows, centers, widths, weights, support, 1 + k_old)
+    block, atr = normal.parts
+    return block[0] + block[1], (atr[0] + atr[1])[1 + k_old:]
+
+
+class GrownNormal:
+    """Dense normal equations grown by appended neurons, assembled once when asked for.
+
+    ``base`` (``A'A`` of ``[a0, a_1 .. a_k]``) is kept as given and each
+    :meth:`append` keeps only the new neurons' rows (:func:`appended_rows`), so a round of
+    new neurons costs their rows, not a copy of the whole matrix; :meth:`matrix` writes
+    the whole ``A'A`` once (the same numbers as :func:`extend_normal`, bit for bit).
+    """
+
+    def __init__(self, base: np.ndarray, atz: np.ndarray):
+        self.base, self.atz = base, np.asarray(atz, np.float64)
+        self.blocks: list[np.ndarray] = []
+        self._whole: np.ndarray | None = base
+
+    @property
+    def size(self) -> int:
+        """Number of unknowns (the bias and every neuron so far)."""
+        return len(self.atz)
+
+    def append(self, rows: np.ndarray, atz: np.ndarray) -> None:
+        """Add the rows of neurons appended after the current ones."""
+        if rows.shape[1] != self.size + len(rows):
+            raise ValueError("appended rows must span every column, theirs included")
+        self.blocks.append(rows)
+        self.atz = np.concatenate([self.atz, atz])
+        self._whole = None
+
+    def matrix(self) -> np.ndarray:
+        """Return the whole symmetric ``A'A`` (assembled on the first call after an append)."""
+        if self._whole is None:
+            n, k = self.size, self.base.shape[0]
+            out = np.empty((n, n))
+            out[:k, :k] = self.base
+            for rows in self.blocks:
+                m = len(rows)
+                out[k:k + m, :k + m] = rows
+                out[:k, k:k + m] = rows[:, :k].T
+                k += m
+            self._whole = out
+        return self._whole
 
 
 def extend_and_solve(xy: np.ndarray, z: np.ndarray, pr: PolishResult, a0: float,
@@ -584,16 +645,26 @@ def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: n
     gains = np.zeros(n_tiles)  # what each block's steps took off the sum of squares
     factors: list[np.ndarray | None] = [None] * n_tiles
 
+    # each tile's ridged block and its Cholesky factor, for the unknowns alive when made:
+    # the sweeps before the drop factor each block once, the one after it the changed ones
+    blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = [None] * n_tiles
+
     def sweep(alive: np.ndarray) -> bool:
         for t, idx in enumerate(tiles):
             idx = idx[alive[idx]]
-            sub = ata[np.ix_(idx, idx)]
-            sub[np.diag_indices_from(sub)] += lam
+            made = blocks[t]
+            if made is None or not np.array_equal(made[0], idx):
+                sub = ata[np.ix_(idx, idx)]
+                sub[np.diag_indices_from(sub)] += lam
+                with one_blas_thread():
+                    chol, info = sla.lapack.dpotrf(sub, lower=1)
+                if info != 0:
+                    return False
+                made = blocks[t] = (idx, sub, chol)
+            _, sub, chol = made
             rhs = atz[idx] - ata[idx] @ w
             with one_blas_thread():
-                chol, info = sla.lapack.dpotrf(sub, lower=1)
-                if info == 0:
-                    step, info = sla.lapack.dpotrs(chol, rhs, lower=1)
+                step, info = sla.lapack.dpotrs(chol, rhs, lower=1)
             if info != 0:
                 return False
             w[idx] += step

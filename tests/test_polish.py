@@ -306,17 +306,39 @@ def test_appended_columns_equal_the_dense_design_matrix_products(learned) -> Non
 def test_appended_weights_are_the_local_least_squares_weights(learned) -> None:
     # the tails' new weights from the extended normal equations = a solve on the residual
     from asrbf_mesh._pieces import _appended_weights, _local_weights
-    from asrbf_mesh._polish import extend_normal
+    from asrbf_mesh._polish import appended_rows
 
     hf, st, first, weights = _appended(learned, 6)
-    ata, atz = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    rows, atz = appended_rows(hf.xy, hf.z, st.centers, st.widths, weights, 3.5,
+                              len(first.widths))
     res = hf.z - first.a0 - dense_design(hf.xy, first.centers, first.widths, first.weights,
                                          3.5, False)[:, 1:] @ first.weights
     cfg = FitConfig()
-    got = _appended_weights(ata, atz, first.a0, first.weights, cfg.polish_ridge)
+    got = _appended_weights(rows, atz, first.a0, first.weights, cfg.polish_ridge)
     ref = _local_weights(hf.xy, res, st.centers[-6:], st.widths[-6:], cfg)
     np.testing.assert_allclose(got, ref, rtol=1e-8, atol=1e-10)
     assert np.abs(got).max() > 1e-3
+
+
+def test_normal_equations_grown_in_two_rounds_are_extend_normals_bit_for_bit(learned) -> None:
+    # the tails keep only each round's new rows and write the whole matrix once
+    from asrbf_mesh._polish import GrownNormal, appended_rows, extend_normal
+
+    hf, st, first, weights = _appended(learned, 9)
+    k = len(first.widths)
+    grown = GrownNormal(first.ata, first.atz)
+    for end in (k + 4, k + 9):  # two rounds: 4 neurons, then 5
+        grown.append(*appended_rows(hf.xy, hf.z, st.centers[:end], st.widths[:end],
+                                    weights[:end], 3.5, grown.size - 1))
+    ata, atz = extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    np.testing.assert_allclose(grown.matrix(), ata, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(grown.matrix(), grown.matrix().T)
+    np.testing.assert_allclose(grown.atz, atz, rtol=1e-12, atol=1e-12)  # (rows summed apart)
+    one = GrownNormal(first.ata, first.atz)
+    one.append(*appended_rows(hf.xy, hf.z, st.centers, st.widths, weights, 3.5, k))
+    assert one.matrix().tobytes() == ata.tobytes() and one.atz.tobytes() == atz.tobytes()
+    with pytest.raises(ValueError, match="every column"):
+        one.append(np.zeros((1, 3)), np.zeros(1))
 
 
 def test_a_kept_residual_is_the_polished_networks_own(learned) -> None:
