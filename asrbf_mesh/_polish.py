@@ -535,7 +535,7 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
                    atz: np.ndarray, a0: float, centers: np.ndarray, widths: np.ndarray,
                    weights: np.ndarray, support: float, ridge: float, limit: float, *,
                    base: np.ndarray | None = None, give_back: float = 1.0,
-                   extra: float = 0.0) -> tuple[PolishResult, int] | None:
+                   extra: float = 0.0, normal: bool = False) -> tuple[PolishResult, int] | None:
     """Solve the weights from normal equations, then drop the neurons hardly needed.
 
     The weights minimize ``||A w - z||^2 + lam ||w - w_now||^2`` (``A'A = ata``,
@@ -552,8 +552,9 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     (unit depth squared): the result's sum of squared errors stays below the
     reference's when ``give_back < 1`` and ``extra`` is 0.
     Returns ``(result, neurons dropped)``, the result's ``ebar_after`` and ``residual``
-    measured (and its ``ebar_before`` NaN), or None above :data:`IDLE_MAX_NEURONS`
-    neurons or when ``M`` is not positive definite.
+    measured (its ``ebar_before`` NaN; its normal equations, without the dropped
+    unknowns, only with ``normal``: their copy took 5 ms at K = 1,500), or None above
+    :data:`IDLE_MAX_NEURONS` neurons or when ``M`` is not positive definite.
     """
     import scipy.linalg as sla
 
@@ -566,7 +567,7 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     w = np.concatenate([[a0], weights])
     if k > TILE_ABOVE:
         return _solve_and_drop_tiled(xy, z, ata, atz, w, centers, widths, support, ridge,
-                                     limit, base, give_back, extra)
+                                     limit, base, give_back, extra, normal)
     # one BLAS thread: worker threads left spinning after a threaded factorization
     # took the cores from the numba kernels that follow it (the piecewise fit of
     # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without; :mod:`._blas`)
@@ -584,22 +585,29 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
         gain = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
         budget = give_back * max(gain, 0.0) + extra
     dropped = eliminate(inv, w, float(limit), float(budget))
-    return _dropped_result(xy, z, ata, atz, w, dropped, centers, widths, support)
+    return _dropped_result(xy, z, w, dropped, centers, widths, support,
+                           (ata, atz) if normal else None)
 
 
-def _dropped_result(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: np.ndarray,
-                    w: np.ndarray, dropped: np.ndarray, centers: np.ndarray,
-                    widths: np.ndarray, support: float) -> tuple[PolishResult, int] | None:
-    """Return the network without the unknowns ``dropped`` (1-based), and its residual."""
+def _dropped_result(xy: np.ndarray, z: np.ndarray, w: np.ndarray, dropped: np.ndarray,
+                    centers: np.ndarray, widths: np.ndarray, support: float,
+                    normal: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> tuple[PolishResult, int] | None:
+    """Return the network without the unknowns ``dropped`` (1-based), and its residual.
+
+    With ``normal`` (``A'A``, ``A'z``), the result keeps them without the dropped unknowns.
+    """
     if not np.all(np.isfinite(w)):
         return None
     keep = np.setdiff1d(np.arange(len(widths)), dropped - 1)
-    cols = np.concatenate([[0], 1 + keep])
     centers, widths, weights = centers[keep], widths[keep], w[1 + keep]
     res = z - _predict(xy, w[0], centers, widths, weights, support)
+    ata = atz = None
+    if normal is not None:
+        cols = np.concatenate([[0], 1 + keep])
+        ata, atz = normal[0][np.ix_(cols, cols)], normal[1][cols]
     return PolishResult(float(w[0]), centers, widths, weights.copy(), float("nan"),
-                        float(np.abs(res).mean()), 1, ata[np.ix_(cols, cols)], atz[cols],
-                        res), len(dropped)
+                        float(np.abs(res).mean()), 1, ata, atz, res), len(dropped)
 
 
 #: :func:`solve_and_drop` above this many neurons solves and drops tile by tile ...
@@ -610,11 +618,72 @@ TILE_NEURONS = 300
 TILE_SWEEPS = 2
 
 
+class _Tiles:
+    """Block Gauss-Seidel over strips of neurons, on dense ridged normal equations.
+
+    ``tiles``: about :data:`TILE_NEURONS` unknowns each across the longer side of the
+    centres' extent, the bias (unknown 0) in every one. :meth:`sweep` steps each tile's
+    weights in turn (``w``, updated in place) from the same ridged normal equations as a
+    whole solve (``lam = ridge * mean(diag(A'A))``), the others fixed at their latest
+    values; ``gains`` sums what each tile's steps took off the sum of squares and
+    ``factors`` holds each tile's last Cholesky factor. Each tile's ridged block is
+    factored once for the unknowns alive when made.
+
+    Not for the weight polish itself (tried for one-piece scans, 2-3 sweeps from the
+    learned weights in place of the dense solve, 2026-11-29): sweeps converge slowly
+    across strips from weights that far off, E-bar 1.0-1.6x the exact polish's on 100 x
+    100 grids of sin(k pi x) cos(k pi y) for 5-10 ms saved.
+    """
+
+    def __init__(self, ata: np.ndarray, atz: np.ndarray, w: np.ndarray, centers: np.ndarray,
+                 ridge: float):
+        k = len(centers)
+        n_tiles = -(-k // TILE_NEURONS)
+        axis = int(np.argmax(np.ptp(centers, axis=0)))
+        order = np.argsort(centers[:, axis], kind="stable")
+        self.tiles = [np.concatenate([[0], 1 + np.sort(t)])
+                      for t in np.array_split(order, n_tiles)]
+        self.ata, self.atz, self.w = ata, atz, w
+        self.lam = max(ridge, _RIDGE_FLOOR) * float(ata.diagonal().mean())
+        self.gains = np.zeros(n_tiles)
+        self.factors: list[np.ndarray | None] = [None] * n_tiles
+        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = [None] * n_tiles
+
+    def sweep(self, alive: np.ndarray) -> bool:
+        """One sweep over the tiles' unknowns that are ``alive``; False if a block is singular."""
+        import scipy.linalg as sla
+
+        ata, atz, w, lam = self.ata, self.atz, self.w, self.lam
+        for t, idx in enumerate(self.tiles):
+            idx = idx[alive[idx]]
+            rows = ata[idx]
+            made = self._blocks[t]
+            if made is None or not np.array_equal(made[0], idx):
+                sub = rows[:, idx]  # (from the rows: a third of np.ix_'s time)
+                sub[np.diag_indices_from(sub)] += lam
+                with one_blas_thread():
+                    chol, info = sla.lapack.dpotrf(sub, lower=1)
+                if info != 0:
+                    return False
+                made = self._blocks[t] = (idx, sub, chol)
+            _, sub, chol = made
+            rhs = atz[idx] - rows @ w
+            with one_blas_thread():
+                step, info = sla.lapack.dpotrs(chol, rhs, lower=1)
+            if info != 0:
+                return False
+            w[idx] += step
+            # the sum of squares fell by 2 d'r - d'A'A d (A'A = sub - lam I)
+            self.gains[t] += 2.0 * step @ rhs - step @ (sub @ step) + lam * (step @ step)
+            self.factors[t] = chol
+        return True
+
+
 def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: np.ndarray,
                           w: np.ndarray, centers: np.ndarray, widths: np.ndarray,
                           support: float, ridge: float, limit: float,
-                          base: np.ndarray | None, give_back: float, extra: float
-                          ) -> tuple[PolishResult, int] | None:
+                          base: np.ndarray | None, give_back: float, extra: float,
+                          normal: bool = False) -> tuple[PolishResult, int] | None:
     """:func:`solve_and_drop` by strips of neurons: O(K^3 / T^2) instead of O(K^3).
 
     The weights are solved by block Gauss-Seidel over ``T`` strips of about
@@ -637,68 +706,34 @@ def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: n
     from ._network_kernels import eliminate
 
     k = len(widths)
-    n_tiles = -(-k // TILE_NEURONS)
-    axis = int(np.argmax(np.ptp(centers, axis=0)))
-    order = np.argsort(centers[:, axis], kind="stable")
-    tiles = [np.concatenate([[0], 1 + np.sort(t)]) for t in np.array_split(order, n_tiles)]
-    lam = max(ridge, _RIDGE_FLOOR) * float(ata.diagonal().mean())
-    gains = np.zeros(n_tiles)  # what each block's steps took off the sum of squares
-    factors: list[np.ndarray | None] = [None] * n_tiles
-
-    # each tile's ridged block and its Cholesky factor, for the unknowns alive when made:
-    # the sweeps before the drop factor each block once, the one after it the changed ones
-    blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = [None] * n_tiles
-
-    def sweep(alive: np.ndarray) -> bool:
-        for t, idx in enumerate(tiles):
-            idx = idx[alive[idx]]
-            made = blocks[t]
-            if made is None or not np.array_equal(made[0], idx):
-                sub = ata[np.ix_(idx, idx)]
-                sub[np.diag_indices_from(sub)] += lam
-                with one_blas_thread():
-                    chol, info = sla.lapack.dpotrf(sub, lower=1)
-                if info != 0:
-                    return False
-                made = blocks[t] = (idx, sub, chol)
-            _, sub, chol = made
-            rhs = atz[idx] - ata[idx] @ w
-            with one_blas_thread():
-                step, info = sla.lapack.dpotrs(chol, rhs, lower=1)
-            if info != 0:
-                return False
-            w[idx] += step
-            # the sum of squares fell by 2 d'r - d'A'A d (A'A = sub - lam I)
-            gains[t] += 2.0 * step @ rhs - step @ (sub @ step) + lam * (step @ step)
-            factors[t] = chol
-        return True
-
+    tiles = _Tiles(ata, atz, w, centers, ridge)
     alive = np.ones(k + 1, dtype=bool)
     for _ in range(TILE_SWEEPS):
-        if not sweep(alive):
+        if not tiles.sweep(alive):
             return None
     budget = np.inf
     if base is not None:
         gain = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
         budget = give_back * max(gain, 0.0) + extra
-    share = np.maximum(gains, 0.0)
-    share = share / share.sum() if share.sum() > 0 else np.full(n_tiles, 1.0 / n_tiles)
+    share = np.maximum(tiles.gains, 0.0)
+    share = share / share.sum() if share.sum() > 0 else np.full(len(share), 1.0 / len(share))
     dropped = []
-    for t, idx in enumerate(tiles):
+    for idx, factor, part in zip(tiles.tiles, tiles.factors, share, strict=True):
         with one_blas_thread():
-            inv, info = sla.lapack.dpotri(factors[t], lower=1)
+            inv, info = sla.lapack.dpotri(factor, lower=1)
         if info != 0:
             return None
         wt = w[idx].copy()
-        tile_budget = budget * share[t] if np.isfinite(budget) else np.inf
-        gone = eliminate(inv, wt, float(limit), float(tile_budget))
+        gone = eliminate(inv, wt, float(limit), float(budget * part if np.isfinite(budget)
+                                                      else np.inf))
         w[idx] = wt
         dropped.append(idx[gone])
     out = np.sort(np.concatenate(dropped)) if dropped else np.zeros(0, np.int64)
     alive[out] = False
-    if len(out) and not sweep(alive):
+    if len(out) and not tiles.sweep(alive):
         return None
-    return _dropped_result(xy, z, ata, atz, w, out, centers, widths, support)
+    return _dropped_result(xy, z, w, out, centers, widths, support,
+                           (ata, atz) if normal else None)
 
 
 def _sum_squares(ata: np.ndarray, atz: np.ndarray, w: np.ndarray) -> float:
@@ -720,7 +755,7 @@ def drop_idle(xy: np.ndarray, z: np.ndarray, pr: PolishResult, support: float,
     if pr.ata is None or pr.atz is None or len(pr.widths) < 2:
         return pr, 0
     got = solve_and_drop(xy, z, pr.ata, pr.atz, pr.a0, pr.centers, pr.widths, pr.weights,
-                         support, ridge, limit)
+                         support, ridge, limit, normal=True)
     if got is None or got[1] == 0 or got[0].ebar_after > pr.ebar_after * (1.0 + tolerance):
         return pr, 0
     return replace(got[0], ebar_before=pr.ebar_before, iterations=pr.iterations), got[1]
