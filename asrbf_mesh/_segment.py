@@ -6,7 +6,9 @@ and across depth jumps (occlusion cliffs), and the rest falls apart into connect
 pieces, each of which a network can fit on its own.
 
 The rule, on triangles (the scan's own, or for a bare point cloud a tight Delaunay
-triangulation of its footprint in the view plane, :func:`point_cloud_faces`):
+triangulation of its footprint in the view plane, :func:`point_cloud_faces`, or for
+points on a regular lattice, a range grid saved as points, the lattice's cells,
+:func:`~asrbf_mesh._footprint.lattice_faces`):
 
 1. a triangle is *cut* when it is seen nearly edge-on, ``|n . view| < cos(wall_angle)``
    (its slope exceeds ``tan(wall_angle)``; 80 degrees is ``|n . view| < 0.17``), when its
@@ -379,7 +381,8 @@ def segment(scan: Any, *, view_axis: str = "z", wall_angle_deg: float = WALL_ANG
     ----------
     scan : Scan, Mesh or (N, 3) array_like
         The scan: its triangles are used when it has some, else (a bare point cloud)
-        a tight Delaunay triangulation of its points in the view plane.
+        a tight Delaunay triangulation of its points in the view plane (points on a
+        regular lattice in the view plane: the lattice's cells).
     view_axis : {"z", "x", "y", "pca"}
         The depth direction, as in :func:`~asrbf_mesh.to_height_field`.
     wall_angle_deg : float
@@ -446,13 +449,21 @@ def segment(scan: Any, *, view_axis: str = "z", wall_angle_deg: float = WALL_ANG
 
 
 def _cloud_faces(local: np.ndarray) -> np.ndarray:
-    """Triangulate a bare cloud tightly in the view plane (no triangles if it spans no area)."""
-    from ._footprint import point_cloud_faces
+    """Triangulate a bare cloud tightly in the view plane (no triangles if it spans no area).
+
+    Points on a regular lattice (a range grid saved as points) by the lattice
+    (:func:`~asrbf_mesh._footprint.lattice_faces`), others by a Delaunay triangulation
+    without long edges.
+    """
+    from ._footprint import lattice_faces, point_cloud_faces
     from ._frame import sampling_spacing
 
     xy = local[:, :2]
     if len(xy) < 3:
         return np.zeros((0, 3), dtype=np.int64)
+    faces = lattice_faces(local)
+    if faces is not None:
+        return faces
     try:
         spacing = sampling_spacing(xy)
     except ScanError:  # all points share one (x, y)

@@ -35,6 +35,68 @@ def with_fragment() -> tuple[np.ndarray, np.ndarray]:
     return np.vstack([pts, frag]), np.vstack([faces, grid_faces(5, 2) + len(pts)])
 
 
+def test_a_range_grid_saved_as_points_is_triangulated_by_its_lattice() -> None:
+    from asrbf_mesh._footprint import lattice_faces
+
+    pts, _ = grid(cliff)
+    pts = pts * [0.25, 0.25, 1.0] + [1000.0, -7.0, 0.0]  # steps 0.25, offset
+    faces = lattice_faces(pts)
+    assert faces is not None and len(faces) == 2 * (NX - 1) * (NY - 1)
+    a, b, c = pts[faces[:, 0]], pts[faces[:, 1]], pts[faces[:, 2]]
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    assert (cross > 0).all()  # counter-clockwise from +z
+    assert np.isclose(cross.sum() / 2, (NX - 1) * (NY - 1) * 0.0625)
+    # each cell's split takes the diagonal with the smaller depth change: the triangle's
+    # diagonal (its long edge p-q) against the cell's other one (r and the fourth corner)
+    depth = {tuple(np.round(v[:2], 6)): v[2] for v in pts}
+    for tri in pts[faces]:
+        side = np.linalg.norm(tri[[1, 2, 0], :2] - tri[:, :2], axis=1)
+        k = int(np.argmax(side))  # edge k joins corners k and k + 1
+        p, q, r = tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]
+        fourth = depth[tuple(np.round(p[:2] + q[:2] - r[:2], 6))]
+        assert abs(p[2] - q[2]) <= abs(r[2] - fourth)
+    # in any order, the same triangles; missing points leave their cells open
+    rng = np.random.default_rng(0)
+    order = rng.permutation(len(pts))
+    again = lattice_faces(pts[order])
+    assert sorted(map(tuple, np.sort(order[again], axis=1))) == sorted(
+        map(tuple, np.sort(faces, axis=1)))
+    keep = np.ones(len(pts), bool)
+    keep[[NX + 5, 3 * NX + 7]] = False  # two inner points
+    holed = lattice_faces(pts[keep])
+    assert len(holed) == len(faces) - 2 * 4  # four cells lose one triangle each, twice
+    # float32 coordinates are still a lattice
+    assert lattice_faces(pts.astype(np.float32).astype(np.float64)) is not None
+
+
+@pytest.mark.parametrize("change", ["random", "jitter", "copy", "aspect", "sparse", "few"])
+def test_points_that_are_no_lattice_get_none(change: str) -> None:
+    from asrbf_mesh._footprint import lattice_faces
+
+    pts, _ = grid(smooth)
+    rng = np.random.default_rng(1)
+    if change == "random":
+        pts = rng.random((800, 3))
+    elif change == "jitter":
+        pts = pts + [0.01, 0.0, 0.0] * rng.standard_normal(pts.shape)
+    elif change == "copy":
+        pts = np.vstack([pts, pts[7]])
+    elif change == "aspect":
+        pts = pts * [2.0, 1.0, 1.0]
+    elif change == "sparse":
+        pts = pts[::5]
+    else:
+        pts = pts[:3]
+    assert lattice_faces(pts) is None
+
+
+def _cloud(pts: np.ndarray, how: str) -> np.ndarray:
+    """The grid's points as a bare cloud: as they are (a lattice) or jittered off it."""
+    if how == "cloud":
+        return pts
+    return pts + 1e-3 * np.random.default_rng(2).standard_normal(pts.shape) * [1, 1, 0]
+
+
 @pytest.mark.parametrize("cloud", [False, True], ids=["faces", "cloud"])
 def test_a_smooth_surface_is_one_piece(cloud: bool) -> None:
     pts, faces = grid(smooth)
@@ -44,10 +106,10 @@ def test_a_smooth_surface_is_one_piece(cloud: bool) -> None:
     assert seg.source == ("cloud" if cloud else "faces")
 
 
-@pytest.mark.parametrize("cloud", [False, True], ids=["faces", "cloud"])
-def test_a_cliff_splits_the_scan_in_two_pieces(cloud: bool) -> None:
+@pytest.mark.parametrize("cloud", [False, "cloud", "jittered"])
+def test_a_cliff_splits_the_scan_in_two_pieces(cloud) -> None:
     pts, faces = grid(cliff)
-    seg = am.segment(pts if cloud else am.Scan(pts, faces))
+    seg = am.segment(_cloud(pts, cloud) if cloud else am.Scan(pts, faces))
     assert seg.n_pieces == 2 and not seg.small.any()
     truth = (pts[:, 0] >= 19.5).astype(np.int64)  # point 0 (x = 0) is in piece 0
     np.testing.assert_array_equal(seg.labels, truth)
@@ -61,12 +123,12 @@ def spiral(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return 10.0 * (np.arctan2(y - 20.3, x - 19.7) % (2 * np.pi)) / (2 * np.pi)
 
 
-@pytest.mark.parametrize("cloud", [False, True], ids=["faces", "cloud"])
-def test_a_piece_wrapping_around_a_cliff_end_is_split(cloud: bool) -> None:
+@pytest.mark.parametrize("cloud", [False, "cloud", "jittered"])
+def test_a_piece_wrapping_around_a_cliff_end_is_split(cloud) -> None:
     from asrbf_mesh._segment_kernels import jump_pairs
 
     pts, faces = grid(spiral, 40, 40)
-    seg = am.segment(pts if cloud else am.Scan(pts, faces))
+    seg = am.segment(_cloud(pts, cloud) if cloud else am.Scan(pts, faces))
     # the cut triangles leave one piece around the centre; rule 4 splits it
     assert seg.n_split >= 1 and seg.to_dict()["n_split"] == seg.n_split
     big = np.flatnonzero(~seg.small)
