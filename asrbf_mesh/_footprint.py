@@ -106,7 +106,8 @@ def _lattice_index(t: np.ndarray, sample: np.ndarray) -> tuple[np.ndarray, float
     if len(u) < 2:
         return None
     step, lo = float(np.diff(u).min()), float(t.min())
-    if not (step > 0 and np.isfinite(step)):
+    # (a lattice filling a share of its box has at most len(t) / _LATTICE_FILL nodes a row)
+    if not (step > 0 and (float(t.max()) - lo) / step < len(t) / _LATTICE_FILL):
         return None
     idx = np.rint((t - lo) / step)
     if np.abs(t - lo - idx * step).max() > _LATTICE_TOL * step:

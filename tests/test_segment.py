@@ -65,11 +65,14 @@ def test_a_range_grid_saved_as_points_is_triangulated_by_its_lattice() -> None:
     keep[[NX + 5, 3 * NX + 7]] = False  # two inner points
     holed = lattice_faces(pts[keep])
     assert len(holed) == len(faces) - 2 * 4  # four cells lose one triangle each, twice
-    # float32 coordinates are still a lattice
+    # float32 coordinates are still a lattice, and so is any scale
     assert lattice_faces(pts.astype(np.float32).astype(np.float64)) is not None
+    for scale in (1e-250, 1e250):
+        np.testing.assert_array_equal(lattice_faces(pts * scale), faces)
 
 
-@pytest.mark.parametrize("change", ["random", "jitter", "copy", "aspect", "sparse", "few"])
+@pytest.mark.parametrize("change", ["random", "jitter", "copy", "aspect", "sparse", "few",
+                                    "tiny gap"])
 def test_points_that_are_no_lattice_get_none(change: str) -> None:
     from asrbf_mesh._footprint import lattice_faces
 
@@ -85,6 +88,8 @@ def test_points_that_are_no_lattice_get_none(change: str) -> None:
         pts = pts * [2.0, 1.0, 1.0]
     elif change == "sparse":
         pts = pts[::5]
+    elif change == "tiny gap":  # a step of 1e-300 would make 1e300 nodes a row
+        pts = np.vstack([pts, pts[0] + [1e-300, 0.5, 0.0]])
     else:
         pts = pts[:3]
     assert lattice_faces(pts) is None
