@@ -146,7 +146,13 @@ def merge_fill(scan: Scan, lat: Lattice, z_filled: np.ndarray,
     in a block where the scan already has a triangle (three of its corners, the fourth
     filled) only the triangle of the filled corner and its two neighbours, so no
     triangle overlaps the scan's. Oriented as the scan's triangles in the lattice.
+    These choices see the scan's triangles as :func:`~asrbf_mesh._hole_find.usable_faces`
+    mends them (a copied face made its edges look taken: a TUM desk frame with 2 % of its
+    faces copied got 7,606 new triangles instead of 7,643).
     """
+    from ._hole_find import usable_faces
+
+    faces, _ = usable_faces(scan.faces)
     H, W = lat.shape
     n = len(scan.points)
     flat_new = np.flatnonzero(filled)
@@ -166,7 +172,7 @@ def merge_fill(scan: Scan, lat: Lattice, z_filled: np.ndarray,
     tris = _block_faces(vgrid, ok, pts)
     tris = tris[(tris >= n).any(axis=1)]
     # blocks where the scan has a triangle: only the filled corner's triangle
-    block_of = _blocks(lat, scan.faces, W)
+    block_of = _blocks(lat, faces, W)
     cell = np.empty(n + len(flat_new), dtype=np.int64)
     cell[:n] = lat.rows * W + lat.cols
     cell[n:] = flat_new
@@ -174,8 +180,8 @@ def merge_fill(scan: Scan, lat: Lattice, z_filled: np.ndarray,
     tb = tr.min(axis=1) * W + tc.min(axis=1)
     taken = np.isin(tb, block_of)
     tris = np.vstack([tris[~taken], _corner_tris(np.unique(tb[taken]), vgrid, ok, n)])
-    tris = _orient(tris, scan.faces, cell, W)
-    tris = _manifold(tris, scan.faces)
+    tris = _orient(tris, faces, cell, W)
+    tris = _manifold(tris, faces)
     quality = np.r_[np.zeros(n), np.ones(len(flat_new))]
     return Mesh(np.vstack([scan.points, new_pts]), np.vstack([scan.faces, tris]),
                 vertex_quality=quality)

@@ -110,6 +110,25 @@ def test_merge_keeps_the_scan_and_closes_the_enclosed_voids() -> None:
     assert used[n:].all()
 
 
+@pytest.mark.parametrize("defect", ["copies", "turned", "repeated"])
+def test_merge_adds_the_same_triangles_to_a_frame_with_faulty_faces(defect: str) -> None:
+    # the decisions see the faces mended (usable_faces): a copied face made its edges
+    # look taken, and the new triangles there were dropped
+    grid, _, _ = _frame()
+    scan = grid.to_scan()
+    lat = find_lattice(scan)
+    res = fill_grid(lattice_grid(scan, lat), seed=0)
+    clean = merge_fill(scan, lat, res.z_filled, res.filled_mask).faces[len(scan.faces):]
+    f = scan.faces
+    pick = np.random.default_rng(3).random(len(f)) < 0.2
+    spoiled = {"copies": np.vstack([f, f[pick][:, [1, 2, 0]]]),
+               "turned": np.where(pick[:, None], f[:, [0, 2, 1]], f),
+               "repeated": np.vstack([f, f[pick][:, [0, 1, 0]]])}[defect]
+    mesh = merge_fill(Scan(scan.points, spoiled), lat, res.z_filled, res.filled_mask)
+    assert np.array_equal(mesh.faces[:len(spoiled)], spoiled)  # the input as it was
+    np.testing.assert_array_equal(mesh.faces[len(spoiled):], clean)
+
+
 def test_merge_completes_a_block_the_scan_half_covers() -> None:
     # one missing pixel inside a plane: its four blocks each hold the scan's triangle on
     # the other three corners, so only the filled corner's triangles are added
