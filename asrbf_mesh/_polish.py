@@ -305,7 +305,11 @@ def appended_rows(xy: np.ndarray, z: np.ndarray, centers: np.ndarray, widths: np
 
     ``(m, K + 1)`` and ``(m,)`` for the ``m`` appended neurons, over the points under
     them: what :func:`extend_normal` adds to the normal equations of the first ``k_old``.
+    Dense only: up to :data:`DENSE_MAX` unknowns in all.
     """
+    if len(widths) + 1 > DENSE_MAX:
+        raise ValueError(f"appended_rows: {len(widths) + 1} unknowns, dense only up to "
+                         f"{DENSE_MAX}")
     rows = rows_under(xy, centers[k_old:], widths[k_old:], support)
     normal = _normal_under(xy, z, rows, centers, widths, weights, support, 1 + k_old)
     block, atr = normal.parts
