@@ -76,6 +76,30 @@ TAIL_QUANTA = 1.5
 #: desk2, 0 of desk): K 275 -> 259, 265 -> 252, 327 -> 316, E-bar within 0.00002, the
 #: 99.9th percentiles of the default reconstruction within 0.01 % of the diagonal.
 TAIL_SUPPORT = 3
+#: The same support is asked of a piece of at least ``NOISY_MIN_POINTS`` points whose
+#: first round finds more than ``NOISY_MISSES`` of its points above the threshold, fewer
+#: than ``NOISY_SUPPORT`` of them supported, 90 % of them within ``NOISY_SPREAD`` times
+#: the threshold: misses that many, that lone and that small are the piece's noise (a
+#: Gaussian's tail beyond the threshold: 1.5-1.6 times it at its 90th percentile; a
+#: ridge two samples wide that learning left behind, 17 % of its grid's points, 47 %
+#: supported: 3.0, and it keeps its tails). The threshold (0.6 E, or three robust noise
+#: scales, the MAD taken of the errors' absolute values: about 1.8 sigma of Gaussian
+#: noise) is within reach of
+#: noise near E: on 100 x 100 grids of sin(x) cos(y), (x^2 - y^2) and a saddle with
+#: noise of 0.35-1.2 % of their depth range, 7-8.5 % of the points missed by it, 9-31 %
+#: of those supported, and the tails chased them: K 1.1-2.0x the single network's
+#: (1,498 -> 2,466 on [0, 1]^2 with noise 0.01, and 0.0080 off the true surface against
+#: 0.0052), the fit 1.7-4.3x its time (``scripts/bench_pieces_synthetic.py``, the last
+#: four surfaces). The dev scans' and the synthetic views' pieces of 1,000 points or
+#: more: 0.9-4.5 % missing in the first round (31-95 % supported, 0 % on a piece of
+#: 1,116 points with 14 misses): the same networks there, bit for bit.
+NOISY_MIN_POINTS = 1000
+#: See ``NOISY_MIN_POINTS``.
+NOISY_MISSES = 0.05
+#: See ``NOISY_MIN_POINTS``.
+NOISY_SUPPORT = 0.5
+#: See ``NOISY_MIN_POINTS``.
+NOISY_SPREAD = 2.0
 #: Tail refinement: neurons whose learned |weight| is under this multiple of E are dropped
 #: before the polish of a piece of several (it saves 5-10 % of the face map's fit). A
 #: scan of one piece keeps them all (:func:`~asrbf_mesh._fit.fit`): it learns as the
@@ -327,8 +351,9 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     TAIL_NOISE x 1.4826 MAD)`` (MAD over a sample of the points: the piece's noise),
     and where the depths come in levels, ``TAIL_QUANTA`` x ``quantum`` (the depth
     quantum at each point, :func:`~asrbf_mesh._segment.depth_quanta`), worst first and
-    no two closer than D_min (with levels, only points where ``TAIL_SUPPORT`` of the 8
-    nearest miss on the same side too: :func:`_supported`); each becomes
+    no two closer than D_min (with levels, or where the first round's misses are many,
+    lone and small (:data:`NOISY_MIN_POINTS`), only points where ``TAIL_SUPPORT`` of the 8 nearest
+    miss on the same side too: :func:`_supported`); each becomes
     a neuron ``u = x, sigma = max(psi ||x - u_near||, D_min / 2)`` (the growth rule of
     learning) whose weight is solved by least squares over the points under it, the
     other neurons fixed (one global solve costs as much as the polish; these cost a
@@ -358,6 +383,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     scale = np.asarray(sub.frame.scale, dtype=np.float64)
     grid, slope2 = None, None
     limit: float | np.ndarray = 0.0
+    supported = quantum is not None  # a tail needs neighbours that miss too (below)
     # the normal equations of the neurons so far, while they are the polish's extended
     # (dense); the new neurons' weights come from them (:func:`_appended_weights`)
     normal = GrownNormal(polished.ata, polished.atz) if polished is not None \
@@ -369,11 +395,12 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
 
         ``res`` is ``z - f`` of this network when known (measured by the solve before).
         """
-        nonlocal grid, slope2, limit, normal
+        nonlocal grid, slope2, limit, normal, supported
         piece = Piece(a0, centers, widths, weights)
         if res is None:
             res = sub.z - piece.eval_unit(sub.xy, cfg.support)[0]
-        if grid is None:  # the first round: the piece's noise scale, once
+        first = grid is None
+        if first:  # the first round: the piece's noise scale, once
             grid, slope2 = point_grid(sub.xy), np.full(sub.n_points, np.nan)
             sample = np.arange(0, len(res), max(1, len(res) // _NOISE_SAMPLE))
             floor = TAIL_FACTOR * cfg.error_threshold
@@ -395,9 +422,18 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         off = _across(piece, sub, res, worst, scale, cfg.support, grid, slope2)
         keep = off > (above[worst] if isinstance(above, np.ndarray) else above)
         worst, off = worst[keep], off[keep]
-        if quantum is not None and len(worst):
+        if supported and len(worst):
             keep = _supported(sub.xy, res, worst, above, grid)
             worst, off = worst[keep], off[keep]
+        elif first and sub.n_points >= NOISY_MIN_POINTS and quantum is None \
+                and len(worst) > NOISY_MISSES * sub.n_points:
+            # many misses, mostly lone and near the threshold: the piece's noise, not
+            # features it lacks
+            keep = _supported(sub.xy, res, worst, above, grid)
+            if keep.mean() < NOISY_SUPPORT \
+                    and np.percentile(off, 90) < NOISY_SPREAD * float(np.max(above)):
+                supported = True
+                worst, off = worst[keep], off[keep]
         worst = worst[np.argsort(-off, kind="stable")][:_TAIL_CANDIDATES]
         picked = worst[spread(sub.xy[worst], d_min)]
         if cfg.max_neurons is not None:  # the neuron cap holds here too
