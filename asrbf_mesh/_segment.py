@@ -24,9 +24,13 @@ points on a regular lattice, a range grid saved as points, the lattice's cells,
    of :func:`~asrbf_mesh.to_height_field` scales depth and plane differently);
    (1b) nor is a triangle on a smooth surface, however steep: when a quadratic height
    field through the 16 points around it misses them by less than ``SMOOTH_FIT`` (0.1)
-   of the triangle's depth extent (RMS). Across a cliff the points around hold both
-   levels; on a steep slope of a smooth surface (a synthetic grid z = sin(3 pi x) cos(3
-   pi y) on the unit square has slopes up to 13) the quadratic fits them to the noise;
+   of the triangle's depth extent (RMS), or (by default, where depths do not come in
+   levels) by less than ``NOISE_SMOOTH`` (3) times the scan's noise scale, the median
+   RMS of the same fits at a sample of points (:func:`_fit_noise`). Across a cliff the
+   points around hold both levels; on a steep slope of a smooth surface (a synthetic
+   grid z = sin(3 pi x) cos(3 pi y) on the unit square has slopes up to 13) the
+   quadratic fits them to the noise, and noise of 1 % of the depth range makes
+   triangles steep that the surface is not (465 pieces without the noise scale);
 2. the pieces are the connected components of the kept triangles' edges;
 3. a point used by cut triangles only (or by none) joins the piece of its nearest kept
    vertex in 3D, so every point has a piece;
@@ -135,6 +139,10 @@ _SPLIT_ROUNDS = 8
 #: 2.2x the single network's E-bar; with both, the face map has 17 pieces (was 20),
 #: bun045 14, bun090 33 (``scripts/bench_segment.py``).
 SMOOTH_FIT = 0.1
+#: ... or under this many times the scan's noise scale (:func:`_fit_noise`).
+NOISE_SMOOTH = 3.0
+#: Points sampled for the noise scale.
+_NOISE_SAMPLE = 2048
 #: Rule 1b: points around a triangle that the quadratic is fitted to.
 _SMOOTH_NEIGHBOURS = 16
 
@@ -304,7 +312,7 @@ class _Steps:
 
 
 def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
-                   jump_factor: float, steps: _Steps | None = None
+                   jump_factor: float, steps: _Steps | None = None, floor: float = 0.0
                    ) -> tuple[np.ndarray, float]:
     """Return the cut triangles, (F,) bool, and the median edge length.
 
@@ -330,11 +338,11 @@ def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
     cut &= area2 > 0
     if cut.any():  # rule 1b: a steep triangle on a smooth surface is no wall
         at = np.flatnonzero(cut)
-        cut[at] = ~_smooth_across(local, faces[at])
+        cut[at] = ~_smooth_across(local, faces[at], floor)
     return cut | ~(area2 > 0), median
 
 
-def _smooth_across(local: np.ndarray, tris: np.ndarray) -> np.ndarray:
+def _smooth_across(local: np.ndarray, tris: np.ndarray, floor: float = 0.0) -> np.ndarray:
     """Whether a quadratic height field fits the points around each triangle (rule 1b).
 
     The :data:`_SMOOTH_NEIGHBOURS` points nearest to the triangle's centroid in the view
@@ -354,7 +362,31 @@ def _smooth_across(local: np.ndarray, tris: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=bool)
     xy = np.ascontiguousarray(local[:, :2])
     k = min(_SMOOTH_NEIGHBOURS, len(local))  # under 6 points: no quadratic, none smooth
-    return smooth_fits(xy, local[:, 2], tris, k, SMOOTH_FIT, point_grid(xy))
+    return smooth_fits(xy, local[:, 2], tris, k, SMOOTH_FIT, point_grid(xy), floor)
+
+
+def _fit_noise(local: np.ndarray) -> float:
+    """Return the scan's noise scale: the median RMS of rule 1b's fits at a sample of points.
+
+    The quadratic through each sampled point's :data:`_SMOOTH_NEIGHBOURS` nearest misses
+    them by the noise where the surface is smooth, most of any scan: so a triangle whose
+    own fit misses by no more than a few times that is on a smooth, noisy surface (0 for
+    fewer than 6 points).
+    """
+    from ._grid_knn import point_grid
+    from ._segment_kernels import smooth_fits
+
+    n = len(local)
+    k = min(_SMOOTH_NEIGHBOURS, n)
+    if k < 6:
+        return 0.0
+    at = np.unique(np.linspace(0, n - 1, min(n, _NOISE_SAMPLE)).astype(np.int64))
+    xy = np.ascontiguousarray(local[:, :2])
+    rms = np.empty(len(at))
+    smooth_fits(xy, local[:, 2], np.repeat(at[:, None], 3, axis=1), k, SMOOTH_FIT,
+                point_grid(xy), rms=rms)
+    rms = rms[np.isfinite(rms)]
+    return float(np.median(rms)) if len(rms) else 0.0
 
 
 def _components(n: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -438,10 +470,14 @@ def segment(scan: Any, *, view_axis: str = "z", wall_angle_deg: float = WALL_ANG
         source = "cloud"
         faces = _cloud_faces(local)
     steps = _Steps(local[:, 2], min_step)
-    cut, median = _cut_triangles(local, faces, wall_angle_deg, jump_factor, steps)
+    # a noisy smooth surface is no wall (rule 1b); not where depths come in levels (the
+    # steps know a depth camera's), nor under a step the caller set
+    floor = NOISE_SMOOTH * _fit_noise(local) if min_step is None and steps.quanta is None \
+        else 0.0
+    cut, median = _cut_triangles(local, faces, wall_angle_deg, jump_factor, steps, floor)
     labels, anchor = _label(local, faces[~cut])
     labels, n_split = _split_wrapped(local, faces, labels, anchor, wall_angle_deg,
-                                     jump_factor * median, steps)
+                                     jump_factor * median, steps, floor)
     sizes = np.bincount(labels)
     return Segmentation(labels, sizes, sizes < min_piece_points, view_axis, wall_angle_deg,
                         jump_factor, min_piece_points, source, int(len(faces)),
@@ -493,7 +529,7 @@ def _label(local: np.ndarray, kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
                    anchor: np.ndarray, wall_angle_deg: float, jump: float,
-                   steps: _Steps | None = None) -> tuple[np.ndarray, int]:
+                   steps: _Steps | None = None, floor: float = 0.0) -> tuple[np.ndarray, int]:
     """Rule 4: split the pieces that wrap around the end of a cliff; (labels, splits).
 
     The searches run along every triangle's edges within a piece, the cut ones too: the
@@ -514,7 +550,7 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     if steps is not None and len(jumps):
         jumps = jumps[steps.keep(local[jumps[:, 0], 2], local[jumps[:, 1], 2])]
     if len(jumps) >= _MIN_CLIFF_PAIRS:  # a steep slope of a smooth surface is no cliff
-        jumps = jumps[~_smooth_across(local, jumps)]
+        jumps = jumps[~_smooth_across(local, jumps, floor)]
     if len(jumps) < _MIN_CLIFF_PAIRS:
         return labels, 0
     n = len(local)

@@ -368,15 +368,17 @@ def _close_components(pts, g2, order, keys, start):
 
 
 def smooth_fits(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, k: int, fit: float,
-                grid: tuple) -> np.ndarray:
+                grid: tuple, floor: float = 0.0, rms: np.ndarray | None = None) -> np.ndarray:
     """(M,) bool: whether a quadratic height field fits the ``k`` points around each row.
 
     Rows of ``tris`` (M, 2 or 3) are point indices; the ``k`` points of ``xy`` nearest to a
     row's centroid (``grid``: :func:`~asrbf_mesh._grid_knn.point_grid` of ``xy``) get a
     least-squares ``z = c0 + c1 u + c2 v + c3 u^2 + c4 uv + c5 v^2`` in coordinates
     scaled by the farthest of them; True where its RMS residual is under ``fit`` times
-    the row's own depth extent. Each row's fit is its own, so the rows run in parts on
-    threads (:func:`~asrbf_mesh._network_kernels.in_threads`).
+    the row's own depth extent or under ``floor``. With ``rms`` ((M,) float64), each
+    row's RMS residual is written there too (NaN where no fit). Each row's fit is its
+    own, so the rows run in parts on threads
+    (:func:`~asrbf_mesh._network_kernels.in_threads`).
     """
     from ._network_kernels import in_threads, threads_for
 
@@ -386,14 +388,17 @@ def smooth_fits(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, k: int, fit: fl
         raise ValueError("smooth_fits: a row indexes no point")
     if len(tris) == 0 or not 6 <= k <= len(xy):
         return out
+    if rms is None:
+        rms = np.empty(len(tris))
+    rms[:] = np.nan
     in_threads(_smooth_fits, len(tris), threads_for(len(tris)),
                np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(z, np.float64),
-               tris, int(k), float(fit), *grid, out)
+               tris, int(k), float(fit), float(floor), *grid, out, rms)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _smooth_fits(xy, z, tris, k, fit, lo, h, gx, gy, start, items, out, i0, i1):
+def _smooth_fits(xy, z, tris, k, fit, floor, lo, h, gx, gy, start, items, out, rms, i0, i1):
     corners = tris.shape[1]
     best_d = np.empty(k)
     best_i = np.empty(k, np.int64)
@@ -441,7 +446,8 @@ def _smooth_fits(xy, z, tris, k, fit, lo, h, gx, gy, start, items, out, i0, i1):
             for r in range(6):
                 res -= a[r] * atb[r]
             ss += res * res
-        out[i] = np.sqrt(ss / held) < fit * (zhi - zlo)
+        rms[i] = np.sqrt(ss / held)
+        out[i] = rms[i] < max(fit * (zhi - zlo), floor)
 
 
 @njit(cache=True, inline="always")

@@ -61,6 +61,13 @@ def surfaces() -> dict[str, np.ndarray]:
                            ("(x − ½)(y − ½)", (x - 0.5) * (y - 0.5), 0.002)):
         zz = z + noise * rng.standard_normal(z.shape)
         out[f"{name}, 100², noise {noise:g}"] = np.c_[x.ravel(), y.ravel(), zz.ravel()]
+    # steep surfaces with noise of 1 % of their depth range (the cut's noise scale)
+    z = np.sin(3 * np.pi * x) * np.cos(3 * np.pi * y) + 0.02 * rng.standard_normal(x.shape)
+    out["sin(3πx)·cos(3πy), 100², noise 0.02"] = np.c_[x.ravel(), y.ravel(), z.ravel()]
+    z = sum(np.exp(-((x - a) ** 2 + (y - b) ** 2) / 0.01) for a, b in centres)
+    z = z + 0.01 * rng.standard_normal(x.shape)
+    out["8 Gaussian bumps (σ 0.07, height 1), 100², noise 0.01"] = np.c_[
+        x.ravel(), y.ravel(), z.ravel()]
     return out
 
 

@@ -398,3 +398,30 @@ def test_steep_smooth_bumps_hold_no_cliff_to_split() -> None:
     x, y = np.meshgrid(g, g)
     z = sum(np.exp(-((x - a) ** 2 + (y - b) ** 2) / 0.01) for a, b in rng.random((8, 2)))
     assert am.segment(np.c_[x.ravel(), y.ravel(), z.ravel()]).n_pieces == 1
+
+
+def test_a_noisy_steep_smooth_surface_is_one_piece(monkeypatch) -> None:
+    # noise of 1 % of the depth range makes triangles steep; rule 1b's quadratic misses
+    # its points by that noise, more than a tenth of a noisy triangle's depth extent: 465
+    # pieces on 100 x 100 before the scan's noise scale was allowed for
+    import asrbf_mesh._segment as S
+
+    rng = np.random.default_rng(5)
+    g = np.linspace(0.0, 1.0, 70)
+    x, y = np.meshgrid(g, g)
+    z = np.sin(3 * np.pi * x) * np.cos(3 * np.pi * y) + 0.02 * rng.standard_normal(x.shape)
+    pts = np.c_[x.ravel(), y.ravel(), z.ravel()]
+    assert 0.01 < S._fit_noise(pts) < 0.02  # the quadratic's residual: ~0.8 sigma
+    assert am.segment(pts).n_pieces == 1
+    monkeypatch.setattr(S, "NOISE_SMOOTH", 0.0)
+    assert am.segment(pts).n_pieces > 20
+
+
+def test_a_noisy_cliff_still_splits() -> None:
+    rng = np.random.default_rng(6)
+    pts, faces = grid(cliff)
+    noisy = pts + np.array([0.0, 0.0, 0.05]) * rng.standard_normal(pts.shape)
+    for scan in (noisy, am.Scan(noisy, faces)):
+        seg = am.segment(scan)
+        assert seg.n_pieces == 2
+        np.testing.assert_array_equal(seg.labels, (pts[:, 0] >= 19.5).astype(np.int64))
