@@ -26,7 +26,7 @@ points on a regular lattice, a range grid saved as points, the lattice's cells,
    field through the 16 points around it misses them by less than ``SMOOTH_FIT`` (0.1)
    of the triangle's depth extent (RMS), or (by default, where depths do not come in
    levels) by less than ``NOISE_SMOOTH`` (3) times the scan's noise scale, the median
-   RMS of the same fits at a sample of points (:func:`_fit_noise`). Across a cliff the
+   RMS of the same fits at a sample of points (:meth:`_Smooth.noise`). Across a cliff the
    points around hold both levels; on a steep slope of a smooth surface (a synthetic
    grid z = sin(3 pi x) cos(3 pi y) on the unit square has slopes up to 13) the
    quadratic fits them to the noise, and noise of 1 % of the depth range makes
@@ -139,7 +139,7 @@ _SPLIT_ROUNDS = 8
 #: 2.2x the single network's E-bar; with both, the face map has 17 pieces (was 20),
 #: bun045 14, bun090 33 (``scripts/bench_segment.py``).
 SMOOTH_FIT = 0.1
-#: ... or under this many times the scan's noise scale (:func:`_fit_noise`).
+#: ... or under this many times the scan's noise scale (:meth:`_Smooth.noise`).
 NOISE_SMOOTH = 3.0
 #: Points sampled for the noise scale.
 _NOISE_SAMPLE = 2048
@@ -312,8 +312,8 @@ class _Steps:
 
 
 def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
-                   jump_factor: float, steps: _Steps | None = None, floor: float = 0.0
-                   ) -> tuple[np.ndarray, float]:
+                   jump_factor: float, steps: _Steps | None = None,
+                   smooth: _Smooth | None = None) -> tuple[np.ndarray, float]:
     """Return the cut triangles, (F,) bool, and the median edge length.
 
     A triangle is cut when it is seen nearly edge-on or too long, and its depth extent
@@ -338,55 +338,69 @@ def _cut_triangles(local: np.ndarray, faces: np.ndarray, wall_angle_deg: float,
     cut &= area2 > 0
     if cut.any():  # rule 1b: a steep triangle on a smooth surface is no wall
         at = np.flatnonzero(cut)
-        cut[at] = ~_smooth_across(local, faces[at], floor)
+        cut[at] = ~(smooth or _Smooth(local)).across(faces[at])
     return cut | ~(area2 > 0), median
 
 
-def _smooth_across(local: np.ndarray, tris: np.ndarray, floor: float = 0.0) -> np.ndarray:
-    """Whether a quadratic height field fits the points around each triangle (rule 1b).
+class _Smooth:
+    """Rule 1b's test on one scan: its points binned once for every fit, and its floor.
 
-    The :data:`_SMOOTH_NEIGHBOURS` points nearest to the triangle's centroid in the view
-    plane get a least-squares quadratic ``z(x, y)``; the triangle lies on a smooth
-    surface when that fit's RMS residual is under :data:`SMOOTH_FIT` times the
-    triangle's own depth extent. Across a cliff the neighbours hold both levels and a
-    quadratic misses them by a good part of the step; on a steep but smooth slope it
-    misses by the noise. ``tris`` may hold pairs of points too (rule 4's jump pairs).
-    Compiled (``_segment_kernels.smooth_fits``): numpy's batched
-    6 x 6 solves and a k-d tree took 31 ms of the face map's cut as a cloud, holding
-    the interpreter's lock while the frame's measures ran beside it.
+    :meth:`across`: whether a quadratic height field fits the points around each
+    triangle. The :data:`_SMOOTH_NEIGHBOURS` points nearest to the triangle's centroid in
+    the view plane get a least-squares quadratic ``z(x, y)``; the triangle lies on a
+    smooth surface when that fit's RMS residual is under :data:`SMOOTH_FIT` times the
+    triangle's own depth extent, or under ``floor``. Across a cliff the neighbours hold
+    both levels and a quadratic misses them by a good part of the step; on a steep but
+    smooth slope it misses by the noise. Rows may be pairs of points too (rule 4's jump
+    pairs). Compiled (``_segment_kernels.smooth_fits``): numpy's batched 6 x 6 solves and
+    a k-d tree took 31 ms of the face map's cut as a cloud, holding the interpreter's lock
+    while the frame's measures ran beside it.
+
+    With ``noisy``, ``floor`` is ``NOISE_SMOOTH`` times :meth:`noise`, else 0.
     """
-    from ._grid_knn import point_grid
-    from ._segment_kernels import smooth_fits
 
-    if len(tris) == 0:  # (no grid to build)
-        return np.zeros(0, dtype=bool)
-    xy = np.ascontiguousarray(local[:, :2])
-    k = min(_SMOOTH_NEIGHBOURS, len(local))  # under 6 points: no quadratic, none smooth
-    return smooth_fits(xy, local[:, 2], tris, k, SMOOTH_FIT, point_grid(xy), floor)
+    def __init__(self, local: np.ndarray, noisy: bool = False) -> None:
+        self.xy = np.ascontiguousarray(local[:, :2])
+        self.z = local[:, 2]
+        self.k = min(_SMOOTH_NEIGHBOURS, len(local))  # under 6 points: none smooth
+        self._grid: tuple | None = None
+        self.floor = NOISE_SMOOTH * self.noise() if noisy else 0.0
 
+    @property
+    def grid(self) -> tuple:
+        """The points binned for the nearest-neighbour searches (made on first use)."""
+        if self._grid is None:
+            from ._grid_knn import point_grid
 
-def _fit_noise(local: np.ndarray) -> float:
-    """Return the scan's noise scale: the median RMS of rule 1b's fits at a sample of points.
+            self._grid = point_grid(self.xy)
+        return self._grid
 
-    The quadratic through each sampled point's :data:`_SMOOTH_NEIGHBOURS` nearest misses
-    them by the noise where the surface is smooth, most of any scan: so a triangle whose
-    own fit misses by no more than a few times that is on a smooth, noisy surface (0 for
-    fewer than 6 points).
-    """
-    from ._grid_knn import point_grid
-    from ._segment_kernels import smooth_fits
+    def across(self, tris: np.ndarray) -> np.ndarray:
+        """(M,) bool: whether each row (2 or 3 point indices) lies on a smooth surface."""
+        from ._segment_kernels import smooth_fits
 
-    n = len(local)
-    k = min(_SMOOTH_NEIGHBOURS, n)
-    if k < 6:
-        return 0.0
-    at = np.unique(np.linspace(0, n - 1, min(n, _NOISE_SAMPLE)).astype(np.int64))
-    xy = np.ascontiguousarray(local[:, :2])
-    rms = np.empty(len(at))
-    smooth_fits(xy, local[:, 2], np.repeat(at[:, None], 3, axis=1), k, SMOOTH_FIT,
-                point_grid(xy), rms=rms)
-    rms = rms[np.isfinite(rms)]
-    return float(np.median(rms)) if len(rms) else 0.0
+        if len(tris) == 0:  # (no grid to build)
+            return np.zeros(0, dtype=bool)
+        return smooth_fits(self.xy, self.z, tris, self.k, SMOOTH_FIT, self.grid, self.floor)
+
+    def noise(self) -> float:
+        """Return the scan's noise scale: the median RMS of the fits at sampled points.
+
+        The quadratic through a point's neighbours misses them by the noise where the
+        surface is smooth, most of any scan: so a triangle whose own fit misses by no more
+        than a few times that is on a smooth, noisy surface (0 for fewer than 6 points).
+        """
+        from ._segment_kernels import smooth_fits
+
+        n = len(self.xy)
+        if self.k < 6:
+            return 0.0
+        at = np.unique(np.linspace(0, n - 1, min(n, _NOISE_SAMPLE)).astype(np.int64))
+        rms = np.empty(len(at))
+        smooth_fits(self.xy, self.z, np.repeat(at[:, None], 3, axis=1), self.k, SMOOTH_FIT,
+                    self.grid, rms=rms)
+        rms = rms[np.isfinite(rms)]
+        return float(np.median(rms)) if len(rms) else 0.0
 
 
 def _components(n: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -472,12 +486,11 @@ def segment(scan: Any, *, view_axis: str = "z", wall_angle_deg: float = WALL_ANG
     steps = _Steps(local[:, 2], min_step)
     # a noisy smooth surface is no wall (rule 1b); not where depths come in levels (the
     # steps know a depth camera's), nor under a step the caller set
-    floor = NOISE_SMOOTH * _fit_noise(local) if min_step is None and steps.quanta is None \
-        else 0.0
-    cut, median = _cut_triangles(local, faces, wall_angle_deg, jump_factor, steps, floor)
+    smooth = _Smooth(local, noisy=min_step is None and steps.quanta is None)
+    cut, median = _cut_triangles(local, faces, wall_angle_deg, jump_factor, steps, smooth)
     labels, anchor = _label(local, faces[~cut])
     labels, n_split = _split_wrapped(local, faces, labels, anchor, wall_angle_deg,
-                                     jump_factor * median, steps, floor)
+                                     jump_factor * median, steps, smooth)
     sizes = np.bincount(labels)
     return Segmentation(labels, sizes, sizes < min_piece_points, view_axis, wall_angle_deg,
                         jump_factor, min_piece_points, source, int(len(faces)),
@@ -529,7 +542,8 @@ def _label(local: np.ndarray, kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
                    anchor: np.ndarray, wall_angle_deg: float, jump: float,
-                   steps: _Steps | None = None, floor: float = 0.0) -> tuple[np.ndarray, int]:
+                   steps: _Steps | None = None, smooth: _Smooth | None = None
+                   ) -> tuple[np.ndarray, int]:
     """Rule 4: split the pieces that wrap around the end of a cliff; (labels, splits).
 
     The searches run along every triangle's edges within a piece, the cut ones too: the
@@ -550,7 +564,7 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     if steps is not None and len(jumps):
         jumps = jumps[steps.keep(local[jumps[:, 0], 2], local[jumps[:, 1], 2])]
     if len(jumps) >= _MIN_CLIFF_PAIRS:  # a steep slope of a smooth surface is no cliff
-        jumps = jumps[~_smooth_across(local, jumps, floor)]
+        jumps = jumps[~(smooth or _Smooth(local)).across(jumps)]
     if len(jumps) < _MIN_CLIFF_PAIRS:
         return labels, 0
     n = len(local)

@@ -411,7 +411,7 @@ def test_a_noisy_steep_smooth_surface_is_one_piece(monkeypatch) -> None:
     x, y = np.meshgrid(g, g)
     z = np.sin(3 * np.pi * x) * np.cos(3 * np.pi * y) + 0.02 * rng.standard_normal(x.shape)
     pts = np.c_[x.ravel(), y.ravel(), z.ravel()]
-    assert 0.01 < S._fit_noise(pts) < 0.02  # the quadratic's residual: ~0.8 sigma
+    assert 0.01 < S._Smooth(pts).noise() < 0.02  # the quadratic's residual: ~0.8 sigma
     assert am.segment(pts).n_pieces == 1
     monkeypatch.setattr(S, "NOISE_SMOOTH", 0.0)
     assert am.segment(pts).n_pieces > 20
