@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit
 
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
+from ._learn_cells import FEW_NEURONS, _cell_of, _d2_to, _link, _nearest_few, _unlink
 from ._learn_heap import _heap_pop, _heap_push_checked
 
 # --- indices into the configuration arrays -------------------------------------------------
@@ -97,46 +98,7 @@ ST_SIZE = 13
 DONE, NEED_SLOTS, NEED_LOG = 0, 1, 2
 
 
-@njit(cache=True, inline="always")
-def _clampi(v, lo, hi):
-    if v < lo:
-        return lo
-    if v > hi:
-        return hi
-    return v
-
-
-@njit(cache=True, inline="always")
-def _cell_of(x, lo, h, g):
-    return _clampi(int(np.floor((x - lo) / h)), 0, g - 1)
-
-
-# --- linked lists -------------------------------------------------------------------------
-
-
-@njit(cache=True, inline="always")
-def _link(head, nxt, prv, cell_of, s, c):
-    first = head[c]
-    nxt[s] = first
-    prv[s] = -1
-    if first >= 0:
-        prv[first] = s
-    head[c] = s
-    cell_of[s] = c
-
-
-@njit(cache=True, inline="always")
-def _unlink(head, nxt, prv, cell_of, s):
-    c = cell_of[s]
-    p = prv[s]
-    n = nxt[s]
-    if p >= 0:
-        nxt[p] = n
-    else:
-        head[c] = n
-    if n >= 0:
-        prv[n] = p
-    cell_of[s] = -1
+# --- the grids' cells ----------------------------------------------------------------------
 
 
 @njit(cache=True, inline="always")
@@ -278,9 +240,7 @@ def _nearest(x, y, W, cf, ci, c_head, c_nxt):
                 if 0 <= jx < gc:
                     s = c_head[jy * gc + jx]
                     while s >= 0:
-                        dx = x - W[s, 2]
-                        dy = y - W[s, 3]
-                        d2 = dx * dx + dy * dy
+                        d2 = _d2_to(x, y, W, s)
                         if d2 < best:
                             best = d2
                             bk = s
@@ -522,6 +482,12 @@ def _make_run_steps(update: int, prune_mode: int, decay: int):
                 dist = np.sqrt(near_d2)
             elif st[ST_K] == 0:  # no centre: the ring search visits every cell (a Kinect
                 near, dist = -1, np.inf  # piece with no neuron: 43,012 steps in 2.4 s)
+            elif st[ST_K] <= FEW_NEURONS:
+                near, near_d2, ties = _nearest_few(x, y, W, alive, st[ST_SLOTS])
+                if ties == 0:
+                    dist = np.sqrt(near_d2)
+                else:
+                    near, dist = _nearest(x, y, W, cf, ci, c_head, c_nxt)
             else:
                 near, dist = _nearest(x, y, W, cf, ci, c_head, c_nxt)
             grow = dist > D and abs(r) > E and rms > EW

@@ -572,40 +572,51 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     graph = SeedGraph(indptr, indices, edge_lengths(local, indptr, indices))
     labels = labels.copy()
     n_split = 0
-    todo = list(np.unique(labels[jumps[:, 0]]))
+
+    def cliff_pairs(pieces: list[int]) -> dict[int, np.ndarray]:
+        """Each piece's jump pairs inside it, in index order, where it has enough."""
+        first = labels[jumps[:, 0]]
+        within = np.flatnonzero(first == labels[jumps[:, 1]])
+        return {p: jumps[k] for p, k in _members(first[within], pieces, within).items()
+                if len(k) >= _MIN_CLIFF_PAIRS}
 
     def sides(piece: int, inner: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         own = np.flatnonzero(labels == piece)
         return own, _wrapped_side(local, own, graph, labels, anchor,
                                   _largest_cliff(local[:, :2], inner, radius))
 
+    from concurrent.futures import FIRST_COMPLETED, wait
+
     from numba import get_num_threads
 
-    # two searches at a time where numba may use two threads (a batch worker pinned to
-    # one thread searches one piece after another)
+    # a piece's search stays in it and its parts are searched again once it is split
+    # (at most _SPLIT_ROUNDS deep): each piece's chain runs on its own, two searches at
+    # a time where numba may use two threads (a batch worker pinned to one thread
+    # searches one piece after another), the largest first. Searched in rounds (every
+    # piece of a round done before the next), a Kinect frame's searches waited for each
+    # round's largest piece: 0.17 s for 0.18 s of searching. The parts are the same
+    # whatever the order; only the labels' numbering would differ, and _stable renumbers
     with ThreadPoolExecutor(max_workers=max(1, min(2, get_num_threads()))) as pool:
-        for _ in range(_SPLIT_ROUNDS):
-            # each piece's jump pairs inside it, in index order (one stable sort)
-            first = labels[jumps[:, 0]]
-            within = np.flatnonzero(first == labels[jumps[:, 1]])
-            pairs = {p: jumps[k] for p, k in _members(first[within], todo, within).items()
-                     if len(k) >= _MIN_CLIFF_PAIRS}
-            # the pieces of a round are apart (a search stays in its piece): their searches
-            # run two at a time, the largest first; the splits then go in the round's order
-            order = sorted(pairs, key=lambda p: -len(pairs[p]))
-            found = dict(zip(order, pool.map(sides, order, [pairs[p] for p in order]),
-                             strict=True))
-            nxt = []
-            for piece in todo:
-                own, side = found.get(int(piece), (None, None))
-                if side is not None:
-                    new = int(labels.max()) + 1
-                    labels[own[side]] = new
-                    n_split += 1
-                    nxt += [piece, new]
-            if not nxt:
-                break
-            todo = nxt
+        running: dict = {}
+
+        def submit(pieces: list[int], depth: int) -> None:
+            pairs = cliff_pairs(pieces)
+            for p in sorted(pairs, key=lambda p: -len(pairs[p])):
+                running[pool.submit(sides, p, pairs[p])] = (p, depth)
+
+        submit([int(p) for p in np.unique(labels[jumps[:, 0]])], 0)
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for fut in sorted(done, key=lambda f: running[f]):
+                piece, depth = running.pop(fut)
+                own, side = fut.result()
+                if side is None:
+                    continue
+                new = int(labels.max()) + 1
+                labels[own[side]] = new
+                n_split += 1
+                if depth + 1 < _SPLIT_ROUNDS:
+                    submit([piece, new], depth + 1)
     return _stable(labels), n_split
 
 

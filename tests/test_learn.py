@@ -460,3 +460,24 @@ def test_each_learning_kernel_is_warmed_before_its_fit_is_timed(franke40) -> Non
     gd = lk.run_steps_for(lk.UPDATE_GD, lk.PRUNE_LITERAL, lk.DECAY_OBSERVATION)
     assert gd is not lk.run_steps and gd.signatures  # its own kernel, compiled
     assert lk.run_steps_for(lk.UPDATE_GD, lk.PRUNE_LITERAL, lk.DECAY_OBSERVATION) is gd
+
+
+def test_nearest_few_is_the_nearest_alive_centre_and_counts_ties() -> None:
+    """Few neurons: the nearest centre among all slots, dead ones skipped, ties counted."""
+    from asrbf_mesh._learn_cells import _nearest_few
+
+    rng = np.random.default_rng(3)
+    W = np.zeros((12, 4))
+    W[:, 2:] = rng.uniform(size=(12, 2))
+    alive = np.ones(12, dtype=np.int8)
+    alive[[2, 7]] = 0
+    for x, y in rng.uniform(size=(50, 2)):
+        d2 = (W[:, 2] - x) ** 2 + (W[:, 3] - y) ** 2
+        d2[alive == 0] = np.inf
+        slot, best, ties = _nearest_few(x, y, W, alive, 12)
+        assert (slot, best, ties) == (int(np.argmin(d2)), d2.min(), 0)
+    W[4, 2:], W[9, 2:] = (0.25, 0.5), (0.75, 0.5)  # (0.5, 0.5) is as near to both
+    W[[0, 1, 3, 5, 6, 8, 10, 11], 2:] = 5.0
+    slot, best, ties = _nearest_few(0.5, 0.5, W, alive, 12)
+    assert (slot, best, ties) == (4, 0.0625, 1)
+    assert _nearest_few(0.5, 0.5, W, np.zeros(12, dtype=np.int8), 12)[0] == -1
