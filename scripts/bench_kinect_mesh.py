@@ -104,10 +104,8 @@ def best(fn, runs: int) -> tuple[float, object]:
     return min(secs), out
 
 
-def run_frame(scan: am.Scan) -> dict:
-    from asrbf_mesh.evaluate import _meshlab
-
-    seg_s, seg = best(lambda: am.segment(scan), 3)
+def fit_times(scan: am.Scan) -> tuple[float, float, am.Network, am.Network]:
+    """Fastest of :data:`FIT_REPS` fits per model, alternating (seed 0): pieces, single."""
     am.fit(scan, progress=False)  # compile / load the kernels outside the clock
     auto_t, one_t = [], []
     for _ in range(FIT_REPS):  # alternating: a slow stretch of the machine hits both
@@ -115,7 +113,14 @@ def run_frame(scan: am.Scan) -> dict:
         auto_t.append(t)
         t, single = best(lambda: am.fit(scan, pieces=1, progress=False), 1)
         one_t.append(t)
-    auto_s, one_s = min(auto_t), min(one_t)
+    return min(auto_t), min(one_t), net, single
+
+
+def run_frame(scan: am.Scan) -> dict:
+    from asrbf_mesh.evaluate import _meshlab
+
+    seg_s, seg = best(lambda: am.segment(scan), 3)
+    auto_s, one_s, net, single = fit_times(scan)
     fill_s, res = best(lambda: am.fill_holes(scan, net, progress=False), 1)
     poisson_s, _ = best(lambda: _meshlab.screened_poisson(scan.points, depth=9), 1)
     return {"n": scan.n_points, "faces": len(scan.faces), "seg_s": seg_s,
@@ -160,6 +165,9 @@ def main(argv: list[str] | None = None) -> int:
                               f"{mesh['vertices_added']:,}", span("mesh"), span("poisson")])
             print(name, w["secs"], flush=True)
             r = run_frame(scan)
+            # the same frame as the PLY the processes read (float32, camera coordinates)
+            ply_auto, ply_one, ply_net, ply_single = fit_times(am.load_scan(Path(tmp) /
+                                                                            "frame.ply"))
             model_rows += pieces_rows(name, scan, args.seeds)
             print(name, r, flush=True)
             rows.append([name, f"{r['n']:,}", f"{r['pieces']:,} ({r['small']:,} small)",
@@ -167,10 +175,13 @@ def main(argv: list[str] | None = None) -> int:
                          f"{r['auto_k']:,} / {r['auto_e']:.5f} / {r['auto_s']:.2f}",
                          f"{r['one_k']:,} / {r['one_e']:.5f} / {r['one_s']:.2f}",
                          f"{r['auto_s'] / r['one_s']:.2f}",
+                         f"{ply_net.n_neurons:,} / {ply_auto:.2f}; {ply_single.n_neurons:,} / "
+                         f"{ply_one:.2f}; {ply_auto / ply_one:.2f}",
                          f"{r['filled']} of {r['found']} / {r['added']:,} / {r['fill_s']:.1f}",
                          f"{r['poisson_s']:.1f}"])
     head = ["frame", "points", "pieces", "cut / triangles", "segment s",
             "pieces: K / E̅ / fit s", "single: K / E̅ / fit s", "fit time ratio",
+            "as its PLY: pieces K / s; single K / s; ratio",
             "fill-holes: filled / vertices added / s", "Poisson s"]
     body = ("## Kinect frames as meshes (metric camera coordinates)\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; `ASRBF_TUM_DIR=... python "
@@ -178,7 +189,9 @@ def main(argv: list[str] | None = None) -> int:
             "Each TUM frame read with its intrinsics and meshed as its range grid (what a "
             "user converting a frame to PLY runs the mesh commands on). Segment: best of 3; "
             f"fits: the fastest of {FIT_REPS} per model, the two models alternating, seed 0 "
-            "(E̅ in the unit cube); fill-holes: one run with the piecewise "
+            "(E̅ in the unit cube); *as its PLY*: the same fits of the frame written as "
+            "the PLY of the whole processes below (float32 camera coordinates, as Open3D "
+            "writes it); fill-holes: one run with the piecewise "
             "network, every natural hole (no size limit); screened Poisson at depth 9, one "
             "run.\n\n" + table(head, rows) + "\n\n"
             f"The issue 14 figures on the frames, seeds {', '.join(map(str, args.seeds))} "
