@@ -127,6 +127,23 @@ def test_a_one_piece_scan_learns_as_the_single_network_then_refines(tmp_path) ->
             == raw[1].save(tmp_path / "b.asrbf").read_bytes())
 
 
+def test_a_piece_too_large_for_dense_normal_equations_keeps_its_polish(monkeypatch) -> None:
+    # a polish with sparse normal equations (an SRTM tile: 6,552 neurons) gets no tails: a
+    # second sparse solve cost as much as the polish and nothing was dropped after it
+    from asrbf_mesh import _polish
+
+    pts, faces = height_grid(lambda x, y: np.sin(x / 9.0) * np.cos(y / 7.0), 40, 30)
+    scan = am.Scan(pts, faces)
+    dense = am.fit(scan, seed=3, progress=False)
+    assert dense.n_neurons != am.fit(scan, seed=3, pieces="1", progress=False).n_neurons
+    monkeypatch.setattr(_polish, "DENSE_MAX", 8)
+    auto = am.fit(scan, seed=3, progress=False)
+    single = am.fit(scan, seed=3, pieces="1", progress=False)
+    assert auto.n_pieces == 1
+    np.testing.assert_array_equal(auto.weights, single.weights)
+    np.testing.assert_array_equal(auto.centers, single.centers)
+
+
 def test_a_tiny_fragment_gets_a_constant_piece() -> None:
     scan = cliff_scan(fragment=True)
     net = am.fit(scan, seed=0, progress=False)
