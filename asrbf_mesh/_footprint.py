@@ -28,14 +28,41 @@ def signed_areas(xy: np.ndarray, tris: np.ndarray) -> np.ndarray:
             - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
 
 
+#: :func:`point_cloud_faces`: a cloud whose median Delaunay edge exceeds this many
+#: sampling spacings is sampled irregularly (an airborne LiDAR tile), and its long edges
+#: are measured against that median edge.
+IRREGULAR = 1.6
+#: :func:`point_cloud_faces`: triangles sampled for the median Delaunay edge.
+_EDGE_SAMPLE = 20_000
+
+
 def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) -> np.ndarray:
     """Triangulate a bare point cloud's footprint: Delaunay in xy without long edges.
 
     Triangles with an edge longer than ``max_edge * spacing`` are dropped (an alpha
-    shape in spirit), so gaps wider than a few samples stay open. Points that span no
-    area (fewer than 3, or all on one line) give no triangles.
+    shape in spirit), so gaps wider than a few samples stay open. ``spacing`` is the
+    median nearest-neighbour distance, the grid step of a range grid's samples, where
+    the median Delaunay edge is about as long; of points strewn at random (a LiDAR
+    tile) the median Delaunay edge is about 2.3 times that, and about half the edges
+    were longer than 2.5 spacings: a 100,000-point tile fell apart into 8,053 pieces.
+    Where the median edge exceeds :data:`IRREGULAR` spacings, edges are measured
+    against it instead. Points that span no area (fewer than 3, or all on one line)
+    give no triangles.
     """
-    return delaunay(xy, max_edge * spacing)
+    tris = delaunay(xy)
+    if len(tris) == 0 or not np.isfinite(max_edge * spacing):
+        return tris
+    x, y = xy[:, 0], xy[:, 1]
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    ux, uy = x[b] - x[a], y[b] - y[a]  # as delaunay() measures them (the same triangles)
+    vx, vy = x[c] - x[a], y[c] - y[a]
+    wx, wy = vx - ux, vy - uy
+    e2 = (ux * ux + uy * uy, vx * vx + vy * vy, wx * wx + wy * wy)
+    some = np.unique(np.linspace(0, len(tris) - 1, min(len(tris), _EDGE_SAMPLE)).astype(np.int64))
+    median = float(np.sqrt(np.median(np.concatenate([e[some] for e in e2]))))
+    scale = median if median > IRREGULAR * spacing else spacing
+    top = (max_edge * scale) ** 2
+    return tris[(e2[0] <= top) & (e2[1] <= top) & (e2[2] <= top)]
 
 
 #: :func:`lattice_faces`: points sampled to find the lattice's steps.

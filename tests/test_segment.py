@@ -425,3 +425,19 @@ def test_a_noisy_cliff_still_splits() -> None:
         seg = am.segment(scan)
         assert seg.n_pieces == 2
         np.testing.assert_array_equal(seg.labels, (pts[:, 0] >= 19.5).astype(np.int64))
+
+
+@pytest.mark.parametrize("sampling", ["random", "rows three times apart"])
+def test_an_irregularly_sampled_smooth_cloud_is_one_piece(sampling: str) -> None:
+    # points strewn at random (a LiDAR tile) have Delaunay edges about 2.3 times their
+    # median nearest-neighbour distance: measured against that distance, half the edges
+    # were long, and 20,000 points fell apart into thousands of pieces
+    rng = np.random.default_rng(0)
+    if sampling == "random":
+        xy = rng.uniform(0, 100, size=(20_000, 2))
+    else:
+        gx, gy = np.meshgrid(np.arange(0, 100, 3.0), np.arange(0, 100, 1.0))
+        xy = np.column_stack([gx.ravel(), gy.ravel()]) + rng.normal(0, 0.05, (gx.size, 2))
+    pts = np.column_stack([xy, 3 * np.sin(xy[:, 0] / 20) * np.cos(xy[:, 1] / 30)])
+    seg = am.segment(pts)
+    assert seg.sizes.max() >= 0.99 * len(pts)
