@@ -80,7 +80,7 @@ piece: on the face map, shorter ones split off slivers that cost neurons and no 
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any
 
@@ -584,8 +584,6 @@ def _split_wrapped(local: np.ndarray, faces: np.ndarray, labels: np.ndarray,
         own = np.flatnonzero(labels == piece)
         return own, _wrapped_side(local, own, graph, labels, anchor,
                                   _largest_cliff(local[:, :2], inner, radius))
-
-    from concurrent.futures import FIRST_COMPLETED, wait
 
     from numba import get_num_threads
 
