@@ -15,7 +15,7 @@ from scipy import ndimage
 from . import _holes_kernels as _hk
 from ._grid_knn import nearest_feature
 from ._outliers import isolated_points
-from ._triangle import delaunay
+from ._triangle import delaunay, squared_edges
 from .errors import ScanError
 
 __all__ = ["Footprint", "lattice_faces", "point_cloud_faces", "signed_areas"]
@@ -52,12 +52,7 @@ def point_cloud_faces(xy: np.ndarray, spacing: float, *, max_edge: float = 2.5) 
     tris = delaunay(xy)
     if len(tris) == 0 or not np.isfinite(max_edge * spacing):
         return tris
-    x, y = xy[:, 0], xy[:, 1]
-    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-    ux, uy = x[b] - x[a], y[b] - y[a]  # as delaunay() measures them (the same triangles)
-    vx, vy = x[c] - x[a], y[c] - y[a]
-    wx, wy = vx - ux, vy - uy
-    e2 = (ux * ux + uy * uy, vx * vx + vy * vy, wx * wx + wy * wy)
+    e2 = squared_edges(xy, tris)  # as delaunay() measures them: the same triangles
     some = np.unique(np.linspace(0, len(tris) - 1, min(len(tris), _EDGE_SAMPLE)).astype(np.int64))
     median = float(np.sqrt(np.median(np.concatenate([e[some] for e in e2]))))
     scale = median if median > IRREGULAR * spacing else spacing

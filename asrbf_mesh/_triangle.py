@@ -19,7 +19,7 @@ import numpy as np
 
 from . import _holes_kernels as _hk
 
-__all__ = ["delaunay", "triangulate"]
+__all__ = ["delaunay", "squared_edges", "triangulate"]
 
 
 def triangulate(pts: np.ndarray, seg: np.ndarray, flags: str) -> tuple[np.ndarray, np.ndarray]:
@@ -205,15 +205,25 @@ def delaunay(xy: np.ndarray, longest: float = np.inf) -> np.ndarray:
         return tris
     x, y = xy[:, 0], xy[:, 1]
     a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-    ux, uy = x[b] - x[a], y[b] - y[a]
-    vx, vy = x[c] - x[a], y[c] - y[a]
-    cross = ux * vy - uy * vx
+    cross = (x[b] - x[a]) * (y[c] - y[a]) - (y[b] - y[a]) * (x[c] - x[a])
     keep = cross != 0
     if np.isfinite(longest):
-        wx, wy = vx - ux, vy - uy
-        top = longest * longest
-        keep &= (ux * ux + uy * uy <= top) & (vx * vx + vy * vy <= top) & (wx * wx + wy * wy <= top)
+        keep &= np.logical_and.reduce([e <= longest * longest for e in squared_edges(xy, tris)])
     flip = cross < 0
     if flip.any():
         tris[flip] = tris[flip][:, [0, 2, 1]]
     return tris[keep]
+
+
+def squared_edges(xy: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Squared lengths of each triangle's edges ab, ac, bc in the plane: three (F,) arrays.
+
+    The same numbers whichever way round a triangle is listed (a turned triangle swaps
+    ab and ac, and bc changes sign before it is squared).
+    """
+    x, y = xy[:, 0], xy[:, 1]
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    ux, uy = x[b] - x[a], y[b] - y[a]
+    vx, vy = x[c] - x[a], y[c] - y[a]
+    wx, wy = vx - ux, vy - uy
+    return ux * ux + uy * uy, vx * vx + vy * vy, wx * wx + wy * wy
