@@ -225,7 +225,8 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
         tr = time.perf_counter()
         quanta = depth_quanta(hf.z)
         params, added = refine_tails(hf, cfg, *params, learned.d_min, pr,
-                                     None if quanta is None else quanta.at(hf.z))
+                                     None if quanta is None else quanta.at(hf.z),
+                                     no_more=True)
         polish_seconds += time.perf_counter() - tr
     a0, centers, widths, weights = params
     net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)

@@ -651,14 +651,15 @@ def gram_rows(indptr, cols, vals, z, w0, ata, atr):
 
 
 @njit(cache=True, nogil=True)
-def eliminate(minv, w, limit, budget):
+def eliminate(minv, w, limit, budget, at_least=0):
     """Greedy backward elimination of least-squares unknowns, one at a time, exactly.
 
     ``minv``'s lower triangle holds the (n, n) inverse of a least-squares problem's
     (ridged) normal matrix ``M`` (the upper triangle is not read) and ``w`` is its
     solution (updated in place). Unknown 0 (the bias) always stays. Each step removes
     the unknown ``j`` whose removal raises the objective least, ``w_j^2 / (M^-1)_jj``,
-    while that rise is under ``limit`` and the rises summed stay within ``budget``;
+    while that rise is under ``limit`` (whatever it is for the first ``at_least``
+    removals) and the rises summed stay within ``budget``;
     the others are solved again by the
     Schur-complement update ``w -= (M^-1)_{:j} w_j / (M^-1)_jj``, and the inverse of the
     remaining matrix is ``M^-1`` minus the removed columns' rank-one terms, kept as rows
@@ -677,7 +678,7 @@ def eliminate(minv, w, limit, budget):
     r = 0
     while r < n - 1:
         best = -1
-        score = limit
+        score = limit if r >= at_least else np.inf
         for j in range(1, n):
             if alive[j] and diag[j] > 0.0:
                 s = w[j] * w[j] / diag[j]

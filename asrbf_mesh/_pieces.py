@@ -115,6 +115,10 @@ NOISY_LONE = 0.2
 #: main piece (seed 8: 1,399 neurons learned) kept 1,040 and fitted in 1.8x the single
 #: network's time.
 TAIL_PRUNE = 0.3
+#: Tail refinement of a scan of one piece (``no_more``): its tails' neurons are paid for by
+#: as many dropped, the cheapest first, whatever each costs, while the removals together
+#: give back at most this share of what the tails gained (else the polished network).
+NET_GIVE_BACK = 0.75
 #: Tail refinement, after the rounds: neurons whose removal (the other weights solved
 #: again) raises the sum of squared errors by less than this many E^2 are dropped
 #: (:func:`~asrbf_mesh._polish.solve_and_drop`).
@@ -347,7 +351,8 @@ def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
 
 def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarray,
                  widths: np.ndarray, weights: np.ndarray, d_min: float,
-                 polished: Any = None, quantum: np.ndarray | None = None
+                 polished: Any = None, quantum: np.ndarray | None = None, *,
+                 no_more: bool = False
                  ) -> tuple[tuple[float, np.ndarray, np.ndarray, np.ndarray], int]:
     """Add neurons where a polished piece still misses its points; (parameters, added).
 
@@ -402,6 +407,10 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     normal = GrownNormal(polished.ata, polished.atz) if polished is not None \
         and isinstance(polished.ata, np.ndarray) \
         and polished.ata.shape[0] == len(widths) + 1 else None
+    k_entry = len(widths)
+    if no_more and normal is None:  # no drop possible: more neurons, never fewer
+        return (a0, centers, widths, weights), 0
+    room: int | None = None  # at most this many neurons after a round (the refill's)
 
     def one_round(a0, centers, widths, weights, factor=1.0, res=None):
         """Neurons for the worst points: (centers, widths, weights, how many added).
@@ -452,14 +461,16 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         picked = worst[spread(sub.xy[worst], d_min)]
         if cfg.max_neurons is not None:  # the neuron cap holds here too
             picked = picked[:max(cfg.max_neurons - len(widths), 0)]
+        if normal is not None:  # dense normal equations for the drop (below) to use
+            picked = picked[:max(DENSE_MAX - 2 - len(widths), 0)]
+        if room is not None:
+            picked = picked[:max(room - len(widths), 0)]
         if len(picked) == 0:
             return centers, widths, weights, 0
         new = sub.xy[picked]
         near = np.linalg.norm(new - centers[cKDTree(centers).query(new)[1]], axis=1)
         sigma = np.maximum(cfg.psi * near, 0.5 * d_min)
         grown_c, grown_w = np.vstack([centers, new]), np.r_[widths, sigma]
-        if normal is not None and len(grown_w) >= DENSE_MAX:
-            normal = None  # too many for dense normal equations: the polish's path below
         if normal is not None and factor == 1.0:
             # the new rows of the normal equations, over the points under the new
             # neurons: the last solve needs them, and they hold the local solve's
@@ -489,22 +500,35 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         # the polish's normal equations extended by the new neurons' columns, solved,
         # and the neurons the network hardly needs dropped, from one dense inverse
         base = np.concatenate([[polished.a0], polished.weights, np.zeros(added)])
-        got = solve_and_drop(sub.xy, sub.z, normal.matrix(), normal.atz, a0, centers, widths,
-                             weights, cfg.support, cfg.polish_ridge, idle, base=base,
-                             give_back=IDLE_GIVE_BACK, extra=_noise_budget(polished, quantum))
+        args = (sub.xy, sub.z, normal.matrix(), normal.atz, a0, centers, widths, weights,
+                cfg.support, cfg.polish_ridge, idle)
+        extra = _noise_budget(polished, quantum)
+        got = solve_and_drop(*args, base=base, give_back=IDLE_GIVE_BACK, extra=extra)
+        if no_more and added and got is not None and len(got[0].widths) >= k_entry:
+            # the idle neurons did not pay for the tails: the cheapest go until they have
+            got = solve_and_drop(*args, base=base, give_back=NET_GIVE_BACK, extra=extra,
+                                 at_least=len(widths) - k_entry + 1)
         if got is not None:
             pr, dropped = got
             if added + dropped == 0 \
-                    or pr.ebar_after > polished.ebar_after * (1.0 + tolerance):
+                    or pr.ebar_after > polished.ebar_after * (1.0 + tolerance) \
+                    or no_more and len(pr.widths) >= k_entry:
                 # nothing changed, or the tails did not pay: the polished network
                 return (polished.a0, polished.centers, polished.widths, polished.weights), 0
+            out, n = (pr.a0, pr.centers, pr.widths, pr.weights), 0
             if dropped and len(pr.widths) and TAIL_ROUNDS:
                 # a last round for the points the dropped neurons left above the threshold
+                room = k_entry - 1 if no_more else None
                 centers, widths, weights, n = one_round(pr.a0, pr.centers, pr.widths,
                                                         pr.weights, REFILL_FACTOR,
                                                         pr.residual)
-                return (pr.a0, centers, widths, weights), added + n
-            return (pr.a0, pr.centers, pr.widths, pr.weights), added
+                out = (pr.a0, centers, widths, weights)
+            # (where depths come in levels the drop gives back noise on purpose: as above)
+            if no_more and quantum is None and np.abs(
+                    sub.z - Piece(*out).eval_unit(sub.xy, cfg.support)[0]
+            ).mean() >= polished.ebar_after:
+                return (polished.a0, polished.centers, polished.widths, polished.weights), 0
+            return out, added + n
         if added == 0:
             return (a0, centers, widths, weights), 0
         pr = extend_and_solve(sub.xy, sub.z, polished, a0, centers, widths, weights,

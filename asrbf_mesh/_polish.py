@@ -539,7 +539,8 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
                    atz: np.ndarray, a0: float, centers: np.ndarray, widths: np.ndarray,
                    weights: np.ndarray, support: float, ridge: float, limit: float, *,
                    base: np.ndarray | None = None, give_back: float = 1.0,
-                   extra: float = 0.0, normal: bool = False) -> tuple[PolishResult, int] | None:
+                   extra: float = 0.0, normal: bool = False,
+                   at_least: int = 0) -> tuple[PolishResult, int] | None:
     """Solve the weights from normal equations, then drop the neurons hardly needed.
 
     The weights minimize ``||A w - z||^2 + lam ||w - w_now||^2`` (``A'A = ata``,
@@ -554,7 +555,8 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     neurons were appended), the removals together raise the sum by at most
     ``give_back`` times what the solved weights gained over ``base``, plus ``extra``
     (unit depth squared): the result's sum of squared errors stays below the
-    reference's when ``give_back < 1`` and ``extra`` is 0.
+    reference's when ``give_back < 1`` and ``extra`` is 0. The first ``at_least``
+    removals go whatever they cost, within that budget (fewer when it runs out).
     Returns ``(result, neurons dropped)``, the result's ``ebar_after`` and ``residual``
     measured (its ``ebar_before`` NaN; its normal equations, without the dropped
     unknowns, only with ``normal``: their copy took 5 ms at K = 1,500), or None above
@@ -571,7 +573,7 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     w = np.concatenate([[a0], weights])
     if k > TILE_ABOVE:
         return _solve_and_drop_tiled(xy, z, ata, atz, w, centers, widths, support, ridge,
-                                     limit, base, give_back, extra, normal)
+                                     limit, base, give_back, extra, normal, at_least)
     # one BLAS thread: worker threads left spinning after a threaded factorization
     # took the cores from the numba kernels that follow it (the piecewise fit of
     # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without; :mod:`._blas`)
@@ -588,7 +590,7 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     if base is not None:  # the gain in the sum of squares, from the normal equations
         gain = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
         budget = give_back * max(gain, 0.0) + extra
-    dropped = eliminate(inv, w, float(limit), float(budget))
+    dropped = eliminate(inv, w, float(limit), float(budget), int(at_least))
     return _dropped_result(xy, z, w, dropped, centers, widths, support,
                            (ata, atz) if normal else None)
 
@@ -687,7 +689,8 @@ def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: n
                           w: np.ndarray, centers: np.ndarray, widths: np.ndarray,
                           support: float, ridge: float, limit: float,
                           base: np.ndarray | None, give_back: float, extra: float,
-                          normal: bool = False) -> tuple[PolishResult, int] | None:
+                          normal: bool = False, at_least: int = 0
+                          ) -> tuple[PolishResult, int] | None:
     """:func:`solve_and_drop` by strips of neurons: O(K^3 / T^2) instead of O(K^3).
 
     The weights are solved by block Gauss-Seidel over ``T`` strips of about
@@ -696,7 +699,8 @@ def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: n
     ridged normal equations as the whole solve. Then each strip drops its neurons by the
     same backward elimination, the other strips' weights fixed, within its share of the
     budget (the whole budget, ``extra`` included, split in proportion to what each strip's
-    steps gained); a last sweep solves the kept weights again. A strip prices a removal with
+    steps gained; ``at_least`` split in proportion to the strips' neurons); a last sweep
+    solves the kept weights again. A strip prices a removal with
     only its own weights free to make up for it, so at least as high as the whole solve
     would (a principal block's inverse has the smaller diagonal): K comes out a little
     higher. On the face map (main piece 880-1,010 neurons after the tails, 3-4 strips; seeds
@@ -729,7 +733,8 @@ def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: n
             return None
         wt = w[idx].copy()
         gone = eliminate(inv, wt, float(limit), float(budget * part if np.isfinite(budget)
-                                                      else np.inf))
+                                                      else np.inf),
+                         -(-at_least * (len(idx) - 1) // k))
         w[idx] = wt
         dropped.append(idx[gone])
     out = np.sort(np.concatenate(dropped)) if dropped else np.zeros(0, np.int64)

@@ -22,6 +22,11 @@ measured by :func:`noise_level` on bun000); the grid is triangulated as the scan
 meshes are (two triangles per 2 x 2 cell of valid pixels, dropped where an edge is
 longer than ``--max-edge`` spacings).
 
+With ``--mesh PATH ...`` other closed models are scanned the same way instead (three views
+each, ``<stem>0.ply`` ... ``<stem>2.ply``; loop-subdivided, centred, 1.2 times bun000's
+extent, at its spacing and noise): pymeshlab ships a few (``cow.obj``, ``bone.ply``,
+``airplane.obj`` in its ``tests/sample_meshes``), scans of shapes the bunny has not.
+
 Each view is written as ``<out>/<name>.ply`` (binary, the scan's own frame). These scans
 are benchmark inputs the project's tuning never saw: ``bench_holes_protocol.py --scans``
 and ``bench_pieces.py --scans`` read them. The surface is Poisson's, smoother than a real
@@ -53,6 +58,30 @@ VIEWS = {
     "syn270": ("y", 270.0), "syn315": ("y", 315.0),
     "syn_top": ("x", 40.0), "syn_chin": ("x", -30.0), "syn_back_top": ("yx", (180.0, 35.0)),
 }
+
+
+#: The views of another model (``--mesh``): name suffix -> (rotation axis, degrees).
+MESH_VIEWS = {"0": ("y", 30.0), "1": ("x", 50.0), "2": ("yx", (200.0, -25.0))}
+
+
+def model_surface(path: Path, extent: float, subdivide: int = 3) -> am.Mesh:
+    """A closed model (any format pymeshlab reads) as a smooth surface the bunny's size.
+
+    Loop-subdivided ``subdivide`` times (pymeshlab's sample meshes are coarse: their
+    flat facets would make piecewise planar scans), centred, its largest extent scaled to
+    ``extent``.
+    """
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(path))
+    if subdivide:
+        ms.meshing_surface_subdivision_loop(iterations=subdivide,
+                                            threshold=pymeshlab.PercentageValue(0))
+    m = ms.current_mesh()
+    v, f = m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)
+    v = (v - v.mean(axis=0)) / float(np.ptp(v, axis=0).max()) * extent
+    return am.Mesh(v, f)
 
 
 def read_conf(folder: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -215,6 +244,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shadow", type=float, default=20.0,
                     help="degrees between the camera and the laser (0: no shadows)")
+    ap.add_argument("--mesh", type=Path, nargs="+", metavar="PATH",
+                    help="scan these closed models instead of the bunny (e.g. pymeshlab's "
+                         "sample meshes: cow.obj, bone.ply, airplane.obj), three views each "
+                         "(<stem>0-2.ply), loop-subdivided, 1.2x bun000's extent, at its "
+                         "spacing and noise")
     args = ap.parse_args(argv)
     if args.bunny is None or not (Path(args.bunny) / "bun.conf").exists():
         ap.exit(2, "needs the bunny scans: --bunny DIR or $ASRBF_BUNNY_DIR (with bun.conf)\n")
@@ -225,16 +259,22 @@ def main(argv: list[str] | None = None) -> int:
     used = ref.points[np.unique(ref.faces)]
     spacing = float(np.median(cKDTree(used[:, :2]).query(used[:, :2], k=2)[0][:, 1]))
     noise = noise_level(ref) if args.noise is None else args.noise
-    surface = merged_surface(folder)
-    print(f"surface: {len(surface.vertices):,} vertices; spacing {spacing:.3g}, "
-          f"noise {noise:.3g} (scan units)")
+    if args.mesh:
+        extent = 1.2 * float(np.ptp(used, axis=0).max())
+        jobs = [(model_surface(m, extent), {m.stem + k: v for k, v in MESH_VIEWS.items()})
+                for m in args.mesh]
+    else:
+        jobs = [(merged_surface(folder), VIEWS)]
+    print(f"spacing {spacing:.3g}, noise {noise:.3g} (scan units)")
     args.out.mkdir(parents=True, exist_ok=True)
-    for i, (name, (axis, deg)) in enumerate(VIEWS.items()):
-        scan = scan_view(surface, view_rotation(axis, deg), spacing, noise, args.grazing,
-                         args.max_edge, args.seed + i, args.shadow)
-        path = args.out / f"{name}.ply"
-        am.save_mesh(am.Mesh(scan.points, scan.faces), path)
-        print(f"{path}: {scan.n_points:,} points, {len(scan.faces):,} faces")
+    for surface, views in jobs:
+        print(f"surface: {len(surface.vertices):,} vertices")
+        for i, (name, (axis, deg)) in enumerate(views.items()):
+            scan = scan_view(surface, view_rotation(axis, deg), spacing, noise, args.grazing,
+                             args.max_edge, args.seed + i, args.shadow)
+            path = args.out / f"{name}.ply"
+            am.save_mesh(am.Mesh(scan.points, scan.faces), path)
+            print(f"{path}: {scan.n_points:,} points, {len(scan.faces):,} faces")
     return 0
 
 

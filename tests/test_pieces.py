@@ -214,6 +214,12 @@ def test_the_tails_do_not_chase_a_depth_cameras_quanta(monkeypatch) -> None:
     quanta = depth_quanta(am.to_height_field(pts).z)
     assert quanta is not None and quanta.at(np.array([0.5]))[0] == pytest.approx(
         q / np.ptp(pts[:, 2]), rel=1e-6)
+    import asrbf_mesh._fit as F
+
+    # (one piece: its tails must pay for themselves by as many neurons dropped; here
+    # they may not, to show what they would chase)
+    monkeypatch.setattr(F, "refine_tails",
+                        lambda *a, **k: P.refine_tails(*a, **{**k, "no_more": False}))
     aware = am.fit(scan, seed=0, progress=False, error_threshold=0.005)
     monkeypatch.setattr(P, "TAIL_QUANTA", 0.0)
     chasing = am.fit(scan, seed=0, progress=False, error_threshold=0.005)
@@ -489,3 +495,34 @@ def test_a_noisy_smooth_piece_does_not_chase_its_noise() -> None:
         return float(np.sqrt(np.mean((net.evaluate(pts[:, :2]) - truth.ravel()) ** 2)))
 
     assert off(auto) <= 1.01 * off(single)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_scan_of_one_piece_gets_no_more_neurons_from_its_tails(seed) -> None:
+    # a scan of one piece learns as the single network; its tails then trade neurons:
+    # each added is paid for by one dropped, or the polished network stays (a synthetic
+    # bone seen from above, one piece: 1,746 -> 2,317 neurons before, past the dense
+    # normal equations where nothing was dropped)
+    from asrbf_mesh._config import FitConfig
+    from asrbf_mesh._frame import to_height_field
+    from asrbf_mesh._pieces import refine_tails
+    from asrbf_mesh._polish import polish_weights
+
+    rng = np.random.default_rng(seed)
+    x, y = (a.ravel().astype(np.float64) for a in np.meshgrid(np.arange(40), np.arange(40)))
+    hf = to_height_field(np.c_[x, y, 4.0 * np.sin(0.1 * x) * np.cos(0.07 * y)])
+    cfg = FitConfig().replace(error_threshold=0.001)
+    k = 30
+    pr = polish_weights(hf.xy, hf.z, 0.0, rng.random((k, 2)), np.full(k, 0.2),
+                        rng.normal(0.0, 0.05, k), cfg.support, cfg.polish_ridge)
+    before = np.abs(hf.z - am.Network(pr.a0, pr.centers, pr.widths, pr.weights, hf.frame,
+                                      cfg).evaluate(hf.xy, unit=True)).mean()
+    grown, added = refine_tails(hf, cfg, pr.a0, pr.centers, pr.widths, pr.weights, 0.05, pr)
+    assert len(grown[2]) > k and added > 0  # tails alone: more neurons
+    (a0, c, w, a), added = refine_tails(hf, cfg, pr.a0, pr.centers, pr.widths, pr.weights,
+                                        0.05, pr, no_more=True)
+    after = np.abs(hf.z - am.Network(a0, c, w, a, hf.frame, cfg).evaluate(hf.xy, unit=True))
+    if added:
+        assert len(w) < k and after.mean() < before
+    else:
+        assert len(w) == k and np.array_equal(a, pr.weights)

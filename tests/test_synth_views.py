@@ -83,3 +83,21 @@ def test_the_laser_shadow_cuts_next_to_a_cliff() -> None:
 def test_view_rotations_are_rotations(axis: str, deg) -> None:
     R = sv.view_rotation(axis, deg)
     assert np.allclose(R @ R.T, np.eye(3)) and np.isclose(np.linalg.det(R), 1.0)
+
+
+def test_another_model_becomes_a_smooth_surface_of_the_extent_asked() -> None:
+    import pymeshlab
+
+    cube = Path(pymeshlab.__file__).parent / "tests" / "sample_meshes" / "cube.obj"
+    if not cube.exists():  # pragma: no cover - a pymeshlab without its sample meshes
+        pytest.skip("pymeshlab's sample meshes are not installed")
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(cube))
+    n_faces = ms.current_mesh().face_number()
+    s = sv.model_surface(cube, 0.2, subdivide=2)
+    assert len(s.faces) == 16 * n_faces  # each loop subdivision splits a face in four
+    assert np.isclose(np.ptp(s.vertices, axis=0).max(), 0.2)
+    assert np.abs(s.vertices.mean(axis=0)).max() < 1e-9
+    # subdivided, the cube rounds off: its vertices no longer all sit on its faces
+    half = np.abs(s.vertices).max(axis=1)
+    assert half.min() < 0.9 * half.max()
