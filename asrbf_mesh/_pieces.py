@@ -387,7 +387,15 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     polish solves them and :func:`~asrbf_mesh._polish.drop_idle` drops. A piece whose
     weight polish had too many neurons for dense normal equations
     (:data:`~asrbf_mesh._polish.DENSE_MAX`) is kept as polished, with no tails: a second
-    sparse solve would cost as much as the polish and nothing could be dropped after it.
+    sparse solve would cost as much as the polish and nothing could be dropped after it,
+    and no piece's tails grow it to that many.
+
+    With ``no_more`` (a scan of one piece) the tails must pay for themselves: when the
+    drop leaves as many neurons as the polished network had, a second drop takes the
+    cheapest whatever each costs, within ``NET_GIVE_BACK`` of the tails' gain, until one
+    fewer is left; the last round stays under that count, and the result is kept only
+    with fewer neurons and (without depth levels) a lower mean error than the polished
+    network, which is returned otherwise.
     """
     from scipy.spatial import cKDTree
 
