@@ -508,9 +508,15 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         # the polish's normal equations extended by the new neurons' columns, solved,
         # and the neurons the network hardly needs dropped, from one dense inverse
         base = np.concatenate([[polished.a0], polished.weights, np.zeros(added)])
+        extra = _noise_budget(polished, quantum)
+        if no_more and added == 0 and extra == 0.0:
+            # no tail and no noise to give back: the drop's budget is a quarter of what
+            # solving the polished weights again gains (next to nothing), and what it
+            # drops would have to lower E-bar: the solve (a tenth of a one-piece fit)
+            # would return the polished network
+            return (polished.a0, polished.centers, polished.widths, polished.weights), 0
         args = (sub.xy, sub.z, normal.matrix(), normal.atz, a0, centers, widths, weights,
                 cfg.support, cfg.polish_ridge, idle)
-        extra = _noise_budget(polished, quantum)
         got = solve_and_drop(*args, base=base, give_back=IDLE_GIVE_BACK, extra=extra)
         if no_more and added and got is not None and len(got[0].widths) >= k_entry:
             # the idle neurons did not pay for the tails: the cheapest go until they have

@@ -50,6 +50,22 @@ HEADERS = ["scan", "N", "model", "pieces", "K", "N:K", "E̅", "fit s",
            "mode scan (holes filled): mesh→scan 99.9 %"]
 
 
+def _title() -> str:
+    """The sections' title suffix: what the scans are."""
+    if not _SUFFIX:
+        return ""
+    return " on other scans" + ("" if _SUFFIX == "-views" else f" ({_SUFFIX[1:]})")
+
+
+def _origin() -> str:
+    """What the scans of ``--scans`` are (a paragraph), or nothing for the dev scans."""
+    if not _PATHS:
+        return ""
+    return ("The scans: range scans made by `scripts/synth_views.py` (the bunny's surface "
+            "from new views; with `--mesh`, other models, e.g. pymeshlab's sample meshes "
+            "`cow.obj`, `bone.ply`, `airplane.obj`, three views each).\n\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -60,14 +76,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scans", nargs="+", metavar="PATH",
                     help="scan files instead of the face map and the bunnies (e.g. the "
                          "views of scripts/synth_views.py); written to their own sections")
+    ap.add_argument("--section", default="views", metavar="NAME",
+                    help="with --scans: the BENCHMARKS sections they go to (pieces-NAME, ...)")
     ap.add_argument("--clouds", action="store_true",
                     help="with --ratio: each scan as a bare point cloud (the points its "
                          "triangles use, no faces: an XYZ or NPY file); its own section")
     args = ap.parse_args(argv)
     global _PATHS, _SUFFIX, _CMD
     _PATHS = args.scans
-    _SUFFIX = "-views" if args.scans else ""
+    _SUFFIX = f"-{args.section}" if args.scans else ""
     _CMD = " --scans " + " ".join(args.scans) if args.scans else ""
+    if args.scans and args.section != "views":
+        _CMD += f" --section {args.section}"
     if args.lod:
         return lod_main(args.seeds)
     if args.ratio:
@@ -85,10 +105,10 @@ def main(argv: list[str] | None = None) -> int:
         rows += _rows(name, scan, args.seeds)
     seeds = ", ".join(map(str, args.seeds))
     body = ("## Piecewise model vs the single network (issue 14)"
-            f"{' on other scans' * bool(_SUFFIX)}\n\n"
+            f"{_title()}\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --seeds {' '.join(map(str, args.seeds))}{_CMD}` "
-            f"({time.perf_counter() - t0:.0f} s)._ Seeds {seeds}.\n\n"
+            f"({time.perf_counter() - t0:.0f} s)._ Seeds {seeds}.\n\n" + _origin() +
             "Single: `am.fit(scan, pieces=1)` (`--pieces 1`, the paper's model). Pieces: "
             "`am.fit(scan)` (`--pieces auto`, the default): the scan cut by `am.segment` "
             "(defaults), one network per piece in the whole scan's unit cube with the same "
@@ -158,7 +178,7 @@ def lod_main(seeds: list[int]) -> int:
                          f"{sum(mono)} of {len(mono)} seeds", median_worst(p_sm, ".2f"),
                          median_worst(p_ms, ".2f"), median_worst(surf, ".2f"),
                          median_worst(ratio, ".2f")])
-    body = (f"## LOD sets of the piecewise model (issue 14){' on other scans' * bool(_SUFFIX)}: "
+    body = (f"## LOD sets of the piecewise model (issue 14){_title()}: "
             f"seeds {', '.join(map(str, seeds))}"
             f"\n\n_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --lod{_CMD}` ({time.perf_counter() - t0:.0f} s)._\n\n"
@@ -231,12 +251,12 @@ def ratio_main(seeds: list[int], reps: int, *, clouds: bool = False) -> int:
     seeds_s = ", ".join(map(str, seeds))
     what = " --clouds" if clouds else ""
     body = ("## Piecewise fit time against the single fit (issue 14)"
-            f"{' on other scans' * bool(_SUFFIX)}{', bare point clouds' * clouds}\n\n"
+            f"{_title()}{', bare point clouds' * clouds}\n\n"
             f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; "
             f"`python scripts/bench_pieces.py --ratio {reps}{what} --seeds "
             f"{' '.join(map(str, seeds))}"
             f"{_CMD}`"
-            f" ({time.perf_counter() - t0:.0f} s)._\n\n"
+            f" ({time.perf_counter() - t0:.0f} s)._\n\n" + _origin() +
             f"`am.fit(scan)` (pieces) and `am.fit(scan, pieces=1)` (single) alternate {reps} "
             "times per seed with two variants of pieces; each keeps its fastest run "
             "(wall-clock seconds of the fit, the frame and the cut into pieces included). "
