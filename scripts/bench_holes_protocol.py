@@ -223,6 +223,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scans", nargs="+", metavar="PATH",
                     help="scan files instead of the face map and the bunnies (e.g. the "
                          "views of scripts/synth_views.py); written to their own section")
+    ap.add_argument("--section", metavar="NAME",
+                    help="write to the sections ...-NAME (e.g. held-out seeds, other models) "
+                         "instead of the default ones")
     args = ap.parse_args(argv)
     if args.peers:  # a peer that cannot run would score as the punched scan itself
         try:
@@ -242,6 +245,8 @@ def main(argv: list[str] | None = None) -> int:
         f" --pieces {args.pieces}" if args.pieces != "auto" else "")
     if args.synthetic:
         flags += f" --synthetic {args.synthetic}"
+    if args.section:
+        flags += f" --section {args.section}"
 
     def header(seconds: float) -> str:
         return (f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; `python "
@@ -255,6 +260,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, seed, why in (bad + opened)[:20]:
         lines.append(f"  - {label(name)} seed {seed}: {why}")
     suffix = "-views" if args.scans and not set(args.scans) & {"face", *BUNNIES} else ""
+    if args.section:
+        suffix = f"-{args.section}"
     if args.fuzz:
         from asrbf_mesh.evaluate._synthetic_holes import SYNTHETIC_KINDS
 
@@ -327,7 +334,8 @@ def main(argv: list[str] | None = None) -> int:
                 rows = [_row(m, rs, traced) for m in methods]
                 parts.append(f"**{label(name)}**\n\n" + table(headers, rows))
     tag = f"holes-protocol-{args.pieces}{suffix}"
-    body = (f"## Hole filling on the punch protocol (issue 15){' on other scans' * bool(suffix)}"
+    title = f" ({args.section})" if args.section else " on other scans" * bool(suffix)
+    body = (f"## Hole filling on the punch protocol (issue 15){title}"
             ": seeds "
             f"{_seeds(args.seeds)}, --pieces {args.pieces}\n\n" + head
             + "\n".join(lines) + "\n\nPer hole: RMS of its truth points' distances to the "
