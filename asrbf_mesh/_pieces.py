@@ -508,13 +508,14 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         # the polish's normal equations extended by the new neurons' columns, solved,
         # and the neurons the network hardly needs dropped, from one dense inverse
         base = np.concatenate([[polished.a0], polished.weights, np.zeros(added)])
+        kept = (polished.a0, polished.centers, polished.widths, polished.weights), 0
         extra = _noise_budget(polished, quantum)
         if no_more and added == 0 and extra == 0.0:
             # no tail and no noise to give back: the drop's budget is a quarter of what
             # solving the polished weights again gains (next to nothing), and what it
             # drops would have to lower E-bar: the solve (a tenth of a one-piece fit)
             # would return the polished network
-            return (polished.a0, polished.centers, polished.widths, polished.weights), 0
+            return kept
         args = (sub.xy, sub.z, normal.matrix(), normal.atz, a0, centers, widths, weights,
                 cfg.support, cfg.polish_ridge, idle)
         got = solve_and_drop(*args, base=base, give_back=IDLE_GIVE_BACK, extra=extra)
@@ -528,7 +529,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
                     or pr.ebar_after > polished.ebar_after * (1.0 + tolerance) \
                     or no_more and len(pr.widths) >= k_entry:
                 # nothing changed, or the tails did not pay: the polished network
-                return (polished.a0, polished.centers, polished.widths, polished.weights), 0
+                return kept
             out, n = (pr.a0, pr.centers, pr.widths, pr.weights), 0
             if dropped and len(pr.widths) and TAIL_ROUNDS:
                 # a last round for the points the dropped neurons left above the threshold
@@ -541,7 +542,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             if no_more and quantum is None and np.abs(
                     sub.z - Piece(*out).eval_unit(sub.xy, cfg.support)[0]
             ).mean() >= polished.ebar_after:
-                return (polished.a0, polished.centers, polished.widths, polished.weights), 0
+                return kept
             return out, added + n
         if added == 0:
             return (a0, centers, widths, weights), 0
