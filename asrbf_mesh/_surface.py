@@ -18,6 +18,7 @@ from ._frame import sampling_spacing
 from ._io import Scan
 from ._mesh import Mesh
 from ._network import Network
+from ._surface_gaps import Gaps, open_gaps
 from ._validate import check_choice, check_float, check_int, check_points
 from .errors import ConfigError, ScanError
 
@@ -91,7 +92,10 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         With a footprint that has triangles: leave out the walls between pieces taller
         than this many grid spacings where the scan is open (an occlusion gap: no scan
         edge joins the two pieces near the wall and its middle is far from the scan's
-        triangles; the mesh stays open across it, as the scan is). None: every wall.
+        triangles; the mesh stays open across it, as the scan is), and tear the grid
+        triangles as tall inside one piece that ramp across a slit (two sheets of the
+        piece meeting at different depths) into their two sheets, each ending on its
+        scan border (:mod:`~asrbf_mesh._surface_gaps`). None: every wall and ramp.
 
     Returns
     -------
@@ -185,11 +189,10 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
         if net.n_pieces > 1:  # each cell's piece, for the grid mesh and its fragments
             owner = net.piece_at(centres).reshape(keep.shape)
     open_at, wall_max = None, None
-    if max_wall is not None and mode != "full" and faces is not None and len(faces) \
-            and net.n_pieces > 1:
+    if max_wall is not None and mode != "full" and faces is not None and len(faces):
         step = float(gx[1] - gx[0])
         wall_max = check_float(max_wall, "max_wall", low=0.0) * step
-        open_at = _gaps(net, local, faces, step)
+        open_at = Gaps(net, local, faces, step)
     mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap, owner=owner,
                                  wall_max=wall_max, open_at=open_at)
     if owner is not None:
@@ -300,9 +303,10 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     ``walls``, the grid edge between two cells of different pieces becomes a wall of two
     triangles between the two pieces' vertices of its end nodes: no ramp across a depth
     jump, and no crack either; with ``wall_max`` (depth, local units), walls taller than
-    that are left out where ``open_at`` (each wall triangle's middle, local xyz, its
-    height and its two pieces -> bool; None: everywhere) says the scan is open. A
-    one-piece network gives the plain grid mesh.
+    that are left out where ``open_at`` (a :class:`~asrbf_mesh._surface_gaps.Gaps`; None:
+    every such wall) says the scan is open, and one piece's grid triangles as tall
+    across a slit are torn into its two sheets (:func:`~asrbf_mesh._surface_gaps.open_gaps`).
+    A one-piece network gives the plain grid mesh.
 
     ``snap`` (the scan's view-plane points, its footprint and whether to snap border
     nodes): a vertex whose node lies in another piece's territory (a cell of one piece
@@ -372,18 +376,15 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
         run = np.linalg.norm(out[:, :2] - border[:, :2], axis=1)
         rise = np.clip(out[:, 2] - border[:, 2], -_SHELF_SLOPE * run, _SHELF_SLOPE * run)
         verts[shelf] = np.column_stack([out[:, :2], border[:, 2] + rise]) @ R.T
-    if wall_max is not None and is_wall.any():
-        local_v = verts @ net.frame.rotation
-        wall = faces[is_wall]
-        height = np.ptp(local_v[wall, 2], axis=1)
-        tall = height > wall_max
-        if open_at is not None and tall.any():
-            w = local_v[wall[tall]]  # each wall triangle's middle: half way up
-            middle = np.column_stack([w[:, :, :2].mean(axis=1),
-                                      0.5 * (w[:, :, 2].min(axis=1) + w[:, :, 2].max(axis=1))])
-            tall[tall] = open_at(middle, height[tall], piece[wall[tall]].min(axis=1),
-                                 piece[wall[tall]].max(axis=1))
-        faces = np.delete(faces, np.flatnonzero(is_wall)[tall], axis=0)
+    if wall_max is not None:
+        R = net.frame.rotation
+        faces, torn, torn_piece = open_gaps(verts @ R, faces, is_wall, piece, wall_max,
+                                            open_at)
+        if len(torn):  # slit ramps torn: their sheets end on scan samples
+            verts = np.concatenate([verts, torn @ R.T])
+            at, pts = np.concatenate([at, torn[:, :2]]), np.concatenate([pts, torn[:, :2]])
+            piece = np.concatenate([piece, torn_piece])
+            which = None if which is None else piece
     mesh = Mesh(verts, faces, vertex_normals=net.normals(at, piece=which))
     return mesh, pts, piece
 
@@ -453,65 +454,6 @@ def _snapped(pts: np.ndarray, faces: np.ndarray, is_wall: np.ndarray, piece: np.
     ok = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
     kept = first[order]
     return moved[kept], f[ok], is_wall[ok], kept
-
-
-#: A wall over an occlusion gap is open when no scan edge joins its two pieces within
-#: 1.5 grid steps of it and its middle is farther from the scan than this share of its
-#: height (and 1.5 grid steps, :data:`OPEN_CAP` at most). Measured on LOD level 0
-#: (Metro RMS, % of the diagonal) of a synthetic bunny view from 270 degrees: every wall
-#: 0.614; the distance alone at 0.35
-#: 0.329, at 0.2 0.087, but at 0.2 the face map's level 0 opened where its scan has
-#: steep triangles down a cliff (a border 4.7 grid steps from the scan's); the edges
-#: alone 0.087, but they opened bun000's and bun045's levels where the piece map cut
-#: steep scan triangles (their RMS order fell on 8 and 4 of seeds 0-9).
-OPEN_SHARE = 0.2
-#: ... but never farther than this many grid steps: a wall tens of grid steps tall (a chin
-#: in front of the body far behind it) has scan surface within a fifth of its height
-#: somewhere along it. On a synthetic bunny view from below, seed 0, the coarser levels
-#: kept such a wall (levels 1-3 at 0.62-0.64 % RMS, out of order within Metro's noise);
-#: capped at 6 steps 0.08 / 0.22 / 0.42 / 0.63 %. At 3 steps bun000's levels 0 and 1
-#: came out of order (walls opened where its scan is closed); at 10, the view's again.
-OPEN_CAP = 6.0
-
-
-def _gaps(net: Network, local: np.ndarray, faces: np.ndarray, step: float) -> Any:
-    """Return a test of walls: the scan has no surface where they stand.
-
-    The test takes each wall triangle's middle (local xyz), height and two pieces. Down
-    a cliff the scan meshes with steep triangles: they join the two pieces, and a wall
-    beside them stands for them (its middle within about a grid step of the scan).
-    Across an occlusion gap the scan is open: no scan edge joins the pieces there, and
-    the nearest scan surface to the wall's middle is a piece's border, half its height
-    away. Open: both (:data:`OPEN_SHARE`).
-    """
-    from scipy.spatial import cKDTree
-
-    from ._igl import point_mesh_distance
-
-    scan = Mesh(local, faces)
-    piece = net.piece_at(local[:, :2])
-    e = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
-                                          faces[:, [2, 0]]]), axis=1), axis=0)
-    e = e[piece[e[:, 0]] != piece[e[:, 1]]]
-    pair = np.minimum(piece[e[:, 0]], piece[e[:, 1]]) * net.n_pieces + np.maximum(
-        piece[e[:, 0]], piece[e[:, 1]])
-    mid = 0.5 * (local[e[:, 0], :2] + local[e[:, 1], :2])
-    trees = {int(k): cKDTree(mid[pair == k]) for k in np.unique(pair)}
-
-    def is_open(middle: np.ndarray, height: np.ndarray, a: np.ndarray, b: np.ndarray
-                ) -> np.ndarray:
-        out = point_mesh_distance(middle, scan) > np.maximum(
-            np.minimum(OPEN_SHARE * height, OPEN_CAP * step), 1.5 * step)
-        key = np.minimum(a, b) * net.n_pieces + np.maximum(a, b)
-        for k in np.unique(key[out]):
-            tree = trees.get(int(k))
-            if tree is not None:
-                at = np.flatnonzero(out & (key == k))
-                near = tree.query(middle[at, :2], distance_upper_bound=1.5 * step)[0]
-                out[at] = ~np.isfinite(near)
-        return out
-
-    return is_open
 
 
 def _snap(net: Network, pts: np.ndarray, piece: np.ndarray, scan_xy: np.ndarray,

@@ -342,7 +342,7 @@ def test_a_tall_wall_opens_where_the_scan_is_far_in_grid_steps() -> None:
     # two flat pieces at depth 0 with a gap between them and no scan edge across it; a
     # wall 10 deep whose middle is 1.0 from the scan: within a fifth of its height, but
     # past 6 grid steps (0.1 each), so the scan is open there; one 0.3 from it is not
-    from asrbf_mesh._surface import _gaps
+    from asrbf_mesh._surface_gaps import Gaps as _gaps
 
     class TwoPieces:
         n_pieces = 2
@@ -361,3 +361,39 @@ def test_a_tall_wall_opens_where_the_scan_is_far_in_grid_steps() -> None:
     middle = np.array([[0.5, 0.5, 1.0], [0.5, 0.5, 0.3]])
     out = is_open(middle, np.array([10.0, 10.0]), np.array([0, 0]), np.array([1, 1]))
     assert out.tolist() == [True, False]
+
+
+def slit_scan(n: int = 61) -> am.Scan:
+    """One piece of two sheets (depth 0 and 1) that meet at a slit along y = 0.5 for
+    x < 0.55 and join ever more gently beyond; no scan triangle spans the slit."""
+    g = np.linspace(0.0, 1.0, n)
+    x, y = np.meshgrid(g, g)
+    z = 1.0 / (1.0 + np.exp(-(y - 0.5) / np.maximum(0.3 * (x - 0.55), 0.002)))
+    pts = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    faces = grid_faces(n, n)
+    return am.Scan(pts, faces=faces[np.ptp(pts[faces, 2], axis=1) < 0.1])
+
+
+def test_a_coarse_grid_tears_a_ramp_across_a_slit_into_its_two_sheets() -> None:
+    from asrbf_mesh._igl import point_mesh_distance
+
+    scan = slit_scan()
+    ref = am.Mesh(scan.points, scan.faces)
+    samples = scan.points[np.unique(scan.faces)]
+    net = am.fit(scan, seed=0, pieces=1, progress=False)  # one network: the slit inside
+    kw = {"spacing_abs": 4 / 60, "footprint": scan, "mode": "surface", "coverage": "any"}
+    ramp = reconstruct(net, **kw)
+    torn = reconstruct(net, max_wall=3.0, **kw)  # what a LOD level does
+
+    def far(mesh: am.Mesh) -> float:
+        return float(point_mesh_distance(mesh.vertices[mesh.faces].mean(axis=1), ref).max())
+
+    assert far(ramp) > 0.3  # cells across the slit ramp from one sheet to the other
+    # torn: what stays is a chord down the steep join (0.12), where the scan is open too
+    assert far(torn) < 0.15
+    # each sheet still ends on its own border at the slit: the scan as near as before
+    reach = point_mesh_distance(samples, torn)
+    assert reach.max() <= 1.1 * point_mesh_distance(samples, ramp).max()
+    assert np.all(signed_areas(torn) > 0)  # no triangle turned over
+    edges = np.sort(torn.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    assert np.unique(edges, axis=0, return_counts=True)[1].max() <= 2  # manifold
