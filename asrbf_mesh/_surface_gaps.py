@@ -154,6 +154,19 @@ class Gaps:
                 out[at] = ~np.isfinite(near)
         return out
 
+    def onto_samples(self, v: np.ndarray, miss: float) -> np.ndarray:
+        """Give vertices on a scan sample's place the sample's depth where they miss it.
+
+        ``v``: (M, 3) local xyz; a vertex on a sample's view-plane place (within 1e-9
+        grid steps) missing its depth by over ``miss`` takes it; the others stay.
+        """
+        d, j = self.xy_tree.query(v[:, :2])
+        z = self.local[j, 2]
+        out = v.copy()
+        on = (d <= 1e-9 * self.step) & (np.abs(v[:, 2] - z) > miss)
+        out[on, 2] = z[on]
+        return out
+
     def torn(self, tri: np.ndarray) -> np.ndarray:
         """Slit ramps ``tri`` ((M, 3, 3) local xyz) torn into their two sheets: (2M, 3, 3).
 

@@ -397,3 +397,26 @@ def test_a_coarse_grid_tears_a_ramp_across_a_slit_into_its_two_sheets() -> None:
     assert np.all(signed_areas(torn) > 0)  # no triangle turned over
     edges = np.sort(torn.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     assert np.unique(edges, axis=0, return_counts=True)[1].max() <= 2  # manifold
+
+
+def test_a_vertex_moved_onto_a_sample_takes_its_depth_where_the_network_misses_it() -> None:
+    from asrbf_mesh._surface_gaps import Gaps
+
+    class OnePiece:
+        n_pieces = 1
+
+        @staticmethod
+        def piece_at(xy: np.ndarray) -> np.ndarray:
+            return np.zeros(len(xy), np.int64)
+
+    g = np.linspace(0.0, 1.0, 11)
+    x, y = np.meshgrid(g, g)
+    pts = np.column_stack([x.ravel(), y.ravel(), 0.1 * x.ravel()])
+    gaps = Gaps(OnePiece(), pts, grid_faces(11, 11), 0.1)
+    v = np.array([[0.3, 0.4, 0.08],     # on a sample (depth 0.03), 0.05 off it
+                  [0.3, 0.4, 0.031],    # on it, within the miss allowed
+                  [0.35, 0.4, 0.5]])    # on none
+    out = gaps.onto_samples(v, 0.01)
+    assert np.allclose(pts[47, :2], [0.3, 0.4])  # the sample there
+    assert out[0, 2] == pts[47, 2] and out[0, :2].tolist() == [0.3, 0.4]
+    assert out[1:].tolist() == v[1:].tolist()
