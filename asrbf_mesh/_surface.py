@@ -322,7 +322,8 @@ def piece_grid_mesh(net: Network, xy: np.ndarray, nx: int, ny: int, keep: np.nda
     mesh : Mesh
         World units, normals from each vertex's piece.
     vertex_xy : (V, 2) float64 array
-        The grid node of each vertex.
+        The grid node of each vertex (moved onto a scan sample: that sample's place;
+        a torn ramp's new vertices: their samples').
     vertex_piece : (V,) int64 array
         The piece each vertex lies on.
 
