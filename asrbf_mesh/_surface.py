@@ -178,7 +178,7 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     # too with coverage "any" (up to a whole cell out), else (half a cell) they stay and
     # take a shelf from the border's depth (_SHELF_SLOPE); a move that would turn a
     # triangle over is not made (_snapped)
-    snap = owner = None
+    snap = owner = edges = None
     if mode != "full":
         on = local_xy if faces is None or not len(faces) else local_xy[np.unique(faces)]
         rim = None
@@ -194,7 +194,7 @@ def reconstruct(net: Network, *, resolution: int | None = None, spacing_abs: flo
     if max_wall is not None and mode != "full" and faces is not None and len(faces):
         step = float(gx[1] - gx[0])
         wall_max = check_float(max_wall, "max_wall", low=0.0) * step
-        open_at = Gaps(net, local, faces, step)
+        open_at = Gaps(net, local, faces, step, border=edges)
     mesh, _, _ = piece_grid_mesh(net, xy, nx, ny, keep, snap=snap, owner=owner,
                                  wall_max=wall_max, open_at=open_at)
     if owner is not None:

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ._footprint import signed_areas
 from ._igl import point_mesh_distance
 from ._mesh import Mesh
 
@@ -62,11 +63,14 @@ class Gaps:
         The scan's triangles.
     step : float
         The grid's spacing, local units.
+    border : (E, 2) int array, optional
+        The scan's boundary edges, if the caller has them.
     """
 
-    def __init__(self, net: Any, local: np.ndarray, faces: np.ndarray, step: float) -> None:
+    def __init__(self, net: Any, local: np.ndarray, faces: np.ndarray, step: float,
+                 border: np.ndarray | None = None) -> None:
         self.net, self.step = net, float(step)
-        self.all_local, self.faces = local, faces
+        self.all_local, self.faces, self.border = local, faces, border
         self.scan = Mesh(local, faces)
 
     # the trees are built when a test first needs them: most levels have few tall triangles
@@ -83,20 +87,21 @@ class Gaps:
         return cKDTree(self.local[:, :2])
 
     @cached_property
-    def rim_tree(self) -> Any:
-        """The scan's border vertices (holes' rims included), view plane.
+    def edge(self) -> float:
+        """The scan's median triangle edge in the view plane."""
+        e = self.all_local[self.faces[:, 1], :2] - self.all_local[self.faces[:, 0], :2]
+        return float(np.median(np.hypot(e[:, 0], e[:, 1])))
 
-        Also sets ``edge``, the scan's median triangle edge in the view plane.
-        """
+    @cached_property
+    def rim_tree(self) -> Any:
+        """The scan's border vertices (holes' rims included), view plane."""
         from scipy.spatial import cKDTree
 
         from ._hole_find import boundary_edges
 
-        f, loc = self.faces, self.all_local
-        e = loc[f[:, 1], :2] - loc[f[:, 0], :2]
-        self.edge = float(np.median(np.hypot(e[:, 0], e[:, 1])))
-        rim = np.unique(boundary_edges(f)[0])
-        return cKDTree(loc[rim, :2] if len(rim) else np.full((1, 2), np.inf))
+        border = boundary_edges(self.faces)[0] if self.border is None else self.border
+        rim = np.unique(border)
+        return cKDTree(self.all_local[rim, :2] if len(rim) else np.full((1, 2), np.inf))
 
     @cached_property
     def trees(self) -> dict[int, Any]:
@@ -139,8 +144,7 @@ class Gaps:
         out = distance > np.maximum(np.minimum(share * height, OPEN_CAP * step), 1.5 * step)
         one = np.flatnonzero(out & (a == b))
         if len(one):  # a slit is open: the scan's border passes it
-            rims = self.rim_tree
-            rim = rims.query(middle[one, :2], distance_upper_bound=max(
+            rim = self.rim_tree.query(middle[one, :2], distance_upper_bound=max(
                 2.0 * step, 2.0 * self.edge))[0]
             out[one[~np.isfinite(rim)]] = False
             one = one[np.isfinite(rim)]
@@ -252,8 +256,8 @@ def open_gaps(local_v: np.ndarray, faces: np.ndarray, is_wall: np.ndarray,
         return kept, *none
     old = local_v[faces[ramp]]
     tri = gaps.torn(old)
-    before = np.repeat(_turn(old), 2)
-    area = _turn(tri)
+    before = np.repeat(signed_areas(local_v[:, :2], faces[ramp]), 2)
+    area = signed_areas(tri.reshape(-1, 3)[:, :2], np.arange(3 * len(tri)).reshape(-1, 3))
     # kept: every corner found, the same turn as the grid triangle's, not a sliver
     ok = np.isfinite(tri).all(axis=(1, 2)) & (area * np.sign(before) > 1e-3 * np.abs(before))
     tri = tri[ok]
@@ -266,9 +270,3 @@ def open_gaps(local_v: np.ndarray, faces: np.ndarray, is_wall: np.ndarray,
     piece_new = np.repeat(np.repeat(piece[faces[ramp]].min(axis=1), 2)[ok], 3)[new]
     return (np.concatenate([kept, torn.reshape(-1, 3)]), tri.reshape(-1, 3)[new],
             piece_new.astype(np.int64))
-
-
-def _turn(tri: np.ndarray) -> np.ndarray:
-    """Twice the signed view-plane area of each (M, 3, 3) triangle."""
-    u, v = tri[:, 1, :2] - tri[:, 0, :2], tri[:, 2, :2] - tri[:, 0, :2]
-    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
