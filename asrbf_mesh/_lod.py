@@ -270,7 +270,10 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         D_max.
     method : {"resample", "refit"}
         ``resample``: one network sampled at grid spacings ``s0 * 2**i``, where ``s0`` is
-        the scan's own sampling spacing. ``refit``: one fit per level with
+        the scan's sampling spacing in the unit square (median nearest neighbour) times
+        the geometric mean of the scan's two extents: the scan's own spacing for a scan
+        about as wide as long, finer for an elongated one (0.63 of it on a view of a bone
+        2.5 times as long as wide). ``refit``: one fit per level with
         ``D_min = d0 * 2**i`` (``d0``: the automatic D_min of the scan, 0.01 for the
         paper's defaults and the scans shipped here), sampled at spacing ``D_min / 4``
         in scan units (level 0 not finer than the scan's spacing, the others scaled
