@@ -162,16 +162,21 @@ def _fit_checked(points: np.ndarray, source: str | None, faces: np.ndarray | Non
         raise ConfigError("order applies to a single network: pass pieces=1")
     polish = polish_kind(hf.fold, cfg.polish, stacklevel=4)
     common = (source, source_hash(points), int(seed), n_stray or None)
+    loose = None  # the points in no scan triangle, as the fit holds them
+    if faces is not None and len(faces):
+        loose = np.ones(len(points), dtype=bool)
+        loose[np.asarray(faces).ravel()] = False
+        loose = loose[~stray]
     if seg is None or seg.n_pieces == 1 or (pieces == "auto" and _scattered(seg)):
         # the paper's single network (pieces=1) is learned and polished as it was; the
         # default model, one piece or scattered, learns as it and gets its tails refined
         if cfg.local_width is None:
             cfg = cfg.replace(local_width=0.0)
         return _fit_single(hf, cfg, polish, seed, progress, order, t0, *common,
-                           refine=pieces != "1")
+                           refine=pieces != "1", loose=loose)
     if cfg.local_width is None:  # the pieces keep their steps local
         cfg = cfg.replace(local_width=LOCAL_WIDTH)
-    return _fit_pieces(hf, seg, cfg, polish, seed, progress, t0, *common)
+    return _fit_pieces(hf, seg, cfg, polish, seed, progress, t0, *common, loose=loose)
 
 
 #: Pieces that learn (not small) must hold at least this share of the points.
@@ -215,7 +220,7 @@ def _elapsed(t0: tuple[float, float]) -> tuple[float, float]:
 def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
                 progress: bool | None, order: Any, t0: tuple[float, float],
                 source: str | None, sha: str, seed_out: int, outliers: int | None, *,
-                refine: bool = False) -> Network:
+                refine: bool = False, loose: np.ndarray | None = None) -> Network:
     refine = refine and polish != "none"
     learned, pr, params, polish_seconds = learn_polished(
         hf, cfg, polish, seed=seed, progress=progress, order=order,
@@ -226,7 +231,7 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
         quanta = depth_quanta(hf.z)
         params, added = refine_tails(hf, cfg, *params, learned.d_min, pr,
                                      None if quanta is None else quanta.at(hf.z),
-                                     no_more=True)
+                                     no_more=True, loose=loose)
         polish_seconds += time.perf_counter() - tr
     a0, centers, widths, weights = params
     net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)
@@ -243,8 +248,9 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
 
 def _fit_pieces(hf: HeightField, seg: Segmentation, cfg: FitConfig, polish: str, seed: int,
                 progress: bool | None, t0: tuple[float, float], source: str | None, sha: str,
-                seed_out: int, outliers: int | None) -> Network:
-    got = learn_pieces(hf, seg, cfg, polish, seed=seed, progress=progress)
+                seed_out: int, outliers: int | None, *,
+                loose: np.ndarray | None = None) -> Network:
+    got = learn_pieces(hf, seg, cfg, polish, seed=seed, progress=progress, loose=loose)
     abs_mm = got.absres * hf.frame.scale[2]
     fit_s, compile_s = _elapsed(t0)
     k = sum(p.n_neurons for p in got.pieces)

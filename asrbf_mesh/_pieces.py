@@ -191,8 +191,11 @@ class PiecesLearned:
 
 
 def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, polish: str, *,
-                 seed: int, progress: bool | None = None) -> PiecesLearned:
+                 seed: int, progress: bool | None = None,
+                 loose: np.ndarray | None = None) -> PiecesLearned:
     """Learn every piece of ``segmentation`` (rows of ``hf``) with piece seeds of ``seed``.
+
+    ``loose`` marks the rows in no scan triangle (their tails: :func:`refine_tails`).
 
     Each piece learns with :func:`piece_seed` of its own index and nothing of the
     others, so neither the order nor the thread changes a bit. Largest first; on two
@@ -220,7 +223,8 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
         return (idx, *_learn_piece(HeightField(hf.xy[idx], hf.z[idx], hf.frame, hf.spacing,
                                                hf.fold), bool(segmentation.small[i]), cfg,
                                    polish, piece_seed(seed, i), tick,
-                                   None if quanta is None else quanta.at(hf.z[idx])))
+                                   None if quanta is None else quanta.at(hf.z[idx]),
+                                   None if loose is None else loose[idx]))
 
     big_first = [int(i) for i in np.argsort(-sizes, kind="stable")]
     if int(learned.sum()) >= 2 and parallel_pieces():
@@ -263,7 +267,8 @@ def learn_pieces(hf: HeightField, segmentation: Segmentation, cfg: FitConfig, po
 
 
 def _learn_piece(sub: HeightField, small: bool, cfg: FitConfig, polish: str, seed: int,
-                 tick: Any, quantum: np.ndarray | None = None) -> tuple:
+                 tick: Any, quantum: np.ndarray | None = None,
+                 loose: np.ndarray | None = None) -> tuple:
     """Learn, polish and refine one piece.
 
     Returns ``(piece, |f - z| per point, |f - z| summed before the polish, learning
@@ -281,7 +286,7 @@ def _learn_piece(sub: HeightField, small: bool, cfg: FitConfig, polish: str, see
         if polish != "none":
             tr = time.perf_counter()
             params, info["tail_neurons"] = refine_tails(sub, cfg, *params, learned.d_min, pr,
-                                                        quantum)
+                                                        quantum, loose=loose)
             info["weak_pruned"] = len(learned.widths) + info["tail_neurons"] - len(params[2])
             seconds += time.perf_counter() - tr
         piece = Piece(*params, learned.log, info)
@@ -356,7 +361,7 @@ def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
 def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarray,
                  widths: np.ndarray, weights: np.ndarray, d_min: float,
                  polished: Any = None, quantum: np.ndarray | None = None, *,
-                 no_more: bool = False
+                 no_more: bool = False, loose: np.ndarray | None = None
                  ) -> tuple[tuple[float, np.ndarray, np.ndarray, np.ndarray], int]:
     """Add neurons where a polished piece still misses its points; (parameters, added).
 
@@ -446,14 +451,15 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             upper = float(np.partition(np.abs(res[sample]), len(sample) // 2)[len(sample) // 2])
             mad = 0.0
             if TAIL_NOISE * 1.4826 * upper > floor:
-                some = _across(piece, sub, res, sample, scale, cfg.support, grid, shape)
+                some = _across(piece, sub, res, sample, scale, cfg.support, grid, shape,
+                               loose)
                 mad = float(np.median(np.abs(some - np.median(some))))
             limit = max(TAIL_FACTOR * cfg.error_threshold, TAIL_NOISE * 1.4826 * mad)
             if quantum is not None:
                 limit = np.maximum(limit, TAIL_QUANTA * quantum)
         above = factor * limit
         worst = np.flatnonzero(np.abs(res) > above)  # the error across is at most |res|
-        off = _across(piece, sub, res, worst, scale, cfg.support, grid, shape)
+        off = _across(piece, sub, res, worst, scale, cfg.support, grid, shape, loose)
         keep = off > (above[worst] if isinstance(above, np.ndarray) else above)
         worst, off = worst[keep], off[keep]
         if supported and len(worst):
@@ -482,6 +488,14 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         new = sub.xy[picked]
         near = np.linalg.norm(new - centers[cKDTree(centers).query(new)[1]], axis=1)
         sigma = np.maximum(cfg.psi * near, 0.5 * d_min)
+        # a neuron for a point past its border stands half its width further out: its
+        # flank, not its peak, follows the surface turning away there
+        past = _past_border(piece.eval_unit(new, cfg.support, True)[1], res[picked],
+                            shape[picked, 1:], scale, None if loose is None else loose[picked])
+        if past.any():
+            out = shape[picked[past], 1:] / scale[:2]
+            new = new.copy()
+            new[past] += (0.5 * sigma[past] / np.linalg.norm(out, axis=1))[:, None] * out
         grown_c, grown_w = np.vstack([centers, new]), np.r_[widths, sigma]
         if normal is not None and factor == 1.0:
             # the new rows of the normal equations, over the points under the new
@@ -623,7 +637,8 @@ def _supported(xy: np.ndarray, res: np.ndarray, at: np.ndarray,
 
 
 def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
-            scale: np.ndarray, support: float, grid: tuple, shape: np.ndarray) -> np.ndarray:
+            scale: np.ndarray, support: float, grid: tuple, shape: np.ndarray,
+            loose: np.ndarray | None = None) -> np.ndarray:
     """Return the error across the surface at points ``at``, not along the view.
 
     A steep point whose depth is off by 5 E may lie within E of the surface: the depth
@@ -638,18 +653,33 @@ def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
     0.7-1.3 E, all on one side, and the reconstruction's 99.9th percentile of scan ->
     mesh distances stood at 0.62-0.66 % of the diagonal). ``shape`` holds per point the
     data's squared slope and the outward direction of the border (zero inside; NaN rows
-    not yet measured, filled here: the data do not change between rounds).
+    not yet measured, filled here: the data do not change between rounds). A point in no
+    scan triangle (``loose``: a flying pixel, a lone return) is no surface's border: half
+    the face map's such points were loose.
     """
     if len(at) == 0:
         return np.zeros(0)
-    ratio = scale[2] / scale[:2]
-    net = piece.eval_unit(sub.xy[at], support, True)[1] * ratio
+    grad = piece.eval_unit(sub.xy[at], support, True)[1]
+    net = grad * (scale[2] / scale[:2])
     new = at[np.isnan(shape[at, 0])]
     if len(new):
         shape[new] = _data_shape(sub, grid, new, scale)
     s2 = np.minimum(np.einsum("ij,ij->i", net, net), shape[at, 0])
-    past = np.einsum("ij,ij->i", net, shape[at, 1:]) * res[at] > 0.0
+    past = _past_border(grad, res[at], shape[at, 1:], scale,
+                        None if loose is None else loose[at])
     return np.abs(res[at]) / np.sqrt(1.0 + np.where(past, 0.0, s2))
+
+
+def _past_border(grad: np.ndarray, res: np.ndarray, outward: np.ndarray, scale: np.ndarray,
+                 loose: np.ndarray | None) -> np.ndarray:
+    """Whether each point's perpendicular onto the surface lands past its piece's border.
+
+    ``grad``: the network's gradient at the points (unit square), ``res`` their depth
+    errors, ``outward`` the border's outward direction (zero inside, :func:`_data_shape`);
+    ``loose`` points (in no scan triangle) never.
+    """
+    past = np.einsum("ij,ij->i", grad * (scale[2] / scale[:2]), outward) * res > 0.0
+    return past if loose is None else past & ~loose
 
 
 def _data_shape(sub: HeightField, grid: tuple, at: np.ndarray, scale: np.ndarray) -> np.ndarray:

@@ -577,6 +577,9 @@ def test_the_tails_see_a_border_point_as_far_as_its_depth_error_when_the_surface
     assert np.allclose(off[~past], cosine(at[~past])) and np.all(off[~past] < 0.006)
     inside = np.flatnonzero(inner)
     assert np.allclose(_across(piece, hf, res, inside, scale, 3.0, grid, fresh), cosine(inside))
+    # a point in no scan triangle (a flying pixel) is no surface's border
+    loose = np.ones(hf.n_points, dtype=bool)
+    assert np.allclose(_across(piece, hf, res, at, scale, 3.0, grid, fresh, loose), cosine(at))
 
 
 def test_a_reconstruction_stays_on_the_samples_where_the_surface_falls_away() -> None:
