@@ -366,7 +366,9 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     """Add neurons where a polished piece still misses its points; (parameters, added).
 
     Each round takes the points whose error across the surface (the depth error times
-    the cosine of the slope, in physical proportions) exceeds ``max(TAIL_FACTOR E,
+    the cosine of the slope, in physical proportions; at the piece's border where the
+    perpendicular onto the surface would land past it, the whole depth error, unless
+    the point is ``loose``, in no scan triangle: :func:`_across`) exceeds ``max(TAIL_FACTOR E,
     TAIL_NOISE x 1.4826 MAD)`` (MAD over a sample of the points: the piece's noise),
     and where the depths come in levels, ``TAIL_QUANTA`` x ``quantum`` (the depth
     quantum at each point, :func:`~asrbf_mesh._segment.depth_quanta`), worst first and
@@ -374,10 +376,11 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     lone and small (:data:`NOISY_MIN_POINTS`), only points where ``TAIL_SUPPORT`` of the 8 nearest
     miss on the same side too: :func:`_supported`); each becomes
     a neuron ``u = x, sigma = max(psi ||x - u_near||, D_min / 2)`` (the growth rule of
-    learning) whose weight is solved by least squares over the points under it, the
-    other neurons fixed (one global solve costs as much as the polish; these cost a
-    fraction). Each round extends the weight polish's normal equations (``polished``,
-    its :class:`~asrbf_mesh._polish.PolishResult`) by the new neurons' columns, over the
+    learning; for a point past its border ``u`` half ``sigma`` further out) whose
+    weight is solved by least squares over the points under it, the other neurons
+    fixed (one global solve costs as much as the polish; these cost a fraction). Each
+    round extends the weight polish's normal equations (``polished``, its
+    :class:`~asrbf_mesh._polish.PolishResult`) by the new neurons' columns, over the
     points under them (:func:`~asrbf_mesh._polish.extend_normal`), and takes that solve
     from them (:func:`_appended_weights`). Stops when no point is left above the
     threshold, after ``TAIL_ROUNDS`` or at the neuron cap (``max_neurons``).
@@ -654,8 +657,8 @@ def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
     mesh distances stood at 0.62-0.66 % of the diagonal). ``shape`` holds per point the
     data's squared slope and the outward direction of the border (zero inside; NaN rows
     not yet measured, filled here: the data do not change between rounds). A point in no
-    scan triangle (``loose``: a flying pixel, a lone return) is no surface's border: half
-    the face map's such points were loose.
+    scan triangle (``loose``: a flying pixel, a lone return) is no surface's border: on
+    the face map half the points the rule took were such.
     """
     if len(at) == 0:
         return np.zeros(0)
