@@ -374,9 +374,11 @@ def test_face_map_lod_set(tmp_path) -> None:
     # its outer nodes end on the scan's nearest sample; a ramp torn at a slit or a hole's
     # cliff (_surface_gaps) ends its sheet on the sheet's nearest sample, and the grid node
     # left on the other side can stand a little farther (level 0: 2.4 cells, at a rough
-    # spot of the scan's where the network's grid triangles stand half a unit off it)
+    # spot of the scan's where the network's grid triangles stand half a unit off it;
+    # 2.85 since the tails' border rule moved the network: at the rim of one of the face
+    # map's natural holes, level 0's rim stands 2.85 cells in from the scan's)
     assert all(r["border_offset_abs"] <= 2.0 * r["spacing_abs"] for r in rows[1:])
-    assert rows[0]["border_offset_abs"] <= 2.5 * rows[0]["spacing_abs"]
+    assert rows[0]["border_offset_abs"] <= 3.0 * rows[0]["spacing_abs"]
     for q in manifest["qem"]:
         assert q["reached"] or q["note"]
     # QEM with a preserved border stops near 4,100 faces on the face map's ragged border
