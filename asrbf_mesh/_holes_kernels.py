@@ -21,6 +21,15 @@ def _orient(ax, ay, bx, by, cx, cy):
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
+@njit(cache=True, inline="always")
+def _corners(xy, faces, t):
+    """Return the view-plane corners of triangle ``t``: ax, ay, bx, by, cx, cy."""
+    a = faces[t, 0]
+    b = faces[t, 1]
+    c = faces[t, 2]
+    return xy[a, 0], xy[a, 1], xy[b, 0], xy[b, 1], xy[c, 0], xy[c, 1]
+
+
 def _faces_in(xy: np.ndarray, faces: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Return ``xy`` (V, 2) float64 and ``faces`` (F, 3) int64, checked to index ``xy``."""
     xy = np.ascontiguousarray(xy, dtype=np.float64)
@@ -71,12 +80,7 @@ def _coverage(xy, faces, lo, cell, nx, ny):
     """Raster (ny, nx) of cells whose centre lies in (or on) some triangle, in xy."""
     out = np.zeros((ny, nx), np.bool_)
     for t in range(faces.shape[0]):
-        a = faces[t, 0]
-        b = faces[t, 1]
-        c = faces[t, 2]
-        ax, ay = xy[a, 0], xy[a, 1]
-        bx, by = xy[b, 0], xy[b, 1]
-        cx, cy = xy[c, 0], xy[c, 1]
+        ax, ay, bx, by, cx, cy = _corners(xy, faces, t)
         area = _orient(ax, ay, bx, by, cx, cy)
         if area == 0.0:
             continue
@@ -127,6 +131,79 @@ def _inside_any(points, xy, faces, cand, closed):
                 out[p] = True
                 break
     return out
+
+
+def grid_triangle_depths(gx: np.ndarray, gy: np.ndarray, xyz: np.ndarray,
+                         faces: np.ndarray, face_piece: np.ndarray,
+                         vertex_key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Depth of a triangle mesh under grid vertices, each from a triangle of its piece.
+
+    ``gx``, ``gy`` are the grid's increasing node coordinates (nodes row-major, x
+    fastest), ``xyz`` (V, 3) the triangles' corners (view-plane place and depth),
+    ``face_piece`` each triangle's piece (-1: none), ``vertex_key`` each grid vertex's
+    ``piece * len(gx) * len(gy) + node`` (-1: skipped). A vertex whose node lies inside a
+    triangle of its piece (on its boundary too) takes the depth of that triangle's plane
+    there, the first such triangle's where several overlap. Each triangle visits only
+    the nodes of its bounding box. Returns each vertex's depth and triangle (NaN, -1
+    where none holds it).
+    """
+    gx = np.ascontiguousarray(gx, dtype=np.float64).ravel()
+    gy = np.ascontiguousarray(gy, dtype=np.float64).ravel()
+    xyz = np.ascontiguousarray(xyz, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise ValueError(f"grid_triangle_depths: corners must have shape (V, 3), got "
+                         f"{xyz.shape}")
+    if len(gx) < 2 or len(gy) < 2 or np.any(np.diff(gx) <= 0) or np.any(np.diff(gy) <= 0):
+        raise ValueError("grid_triangle_depths: the grid needs increasing nodes, 2+ per axis")
+    xy, faces = _faces_in(xyz[:, :2], faces, "grid_triangle_depths")
+    face_piece = np.ascontiguousarray(face_piece, dtype=np.int64).ravel()
+    key = np.ascontiguousarray(vertex_key, dtype=np.int64).ravel()
+    if len(face_piece) != len(faces):
+        raise ValueError("grid_triangle_depths: one piece per triangle")
+    order = np.argsort(key, kind="stable")
+    return _grid_triangle_depths(gx, gy, xy, np.ascontiguousarray(xyz[:, 2]), faces,
+                                 face_piece, key[order], order)
+
+
+@njit(cache=True, nogil=True)
+def _grid_triangle_depths(gx, gy, xy, z, faces, face_piece, keys, vertex):
+    """Depth and triangle under each vertex (``keys`` sorted, ``vertex`` their owners)."""
+    nx, ny = gx.shape[0], gy.shape[0]
+    n = keys.shape[0]
+    depth = np.full(n, np.nan)
+    which = np.full(n, -1, np.int64)
+    for t in range(faces.shape[0]):
+        p = face_piece[t]
+        if p < 0:
+            continue
+        ax, ay, bx, by, cx, cy = _corners(xy, faces, t)
+        area = _orient(ax, ay, bx, by, cx, cy)
+        if area == 0.0 or not np.isfinite(area):
+            continue
+        i0 = np.searchsorted(gx, min(ax, bx, cx))
+        i1 = np.searchsorted(gx, max(ax, bx, cx), side="right")
+        j0 = np.searchsorted(gy, min(ay, by, cy))
+        j1 = np.searchsorted(gy, max(ay, by, cy), side="right")
+        base = p * nx * ny
+        for j in range(j0, j1):
+            py = gy[j]
+            for i in range(i0, i1):
+                key = base + j * nx + i
+                k = np.searchsorted(keys, key)
+                if k >= n or keys[k] != key:
+                    continue
+                v = vertex[k]
+                if which[v] >= 0:
+                    continue
+                px = gx[i]
+                w0 = _orient(bx, by, cx, cy, px, py) / area
+                w1 = _orient(cx, cy, ax, ay, px, py) / area
+                w2 = 1.0 - w0 - w1
+                if w0 >= -1e-9 and w1 >= -1e-9 and w2 >= -1e-9:
+                    depth[v] = (w0 * z[faces[t, 0]] + w1 * z[faces[t, 1]]
+                                + w2 * z[faces[t, 2]])
+                    which[v] = t
+    return depth, which
 
 
 def walk_cycles(half_edges: np.ndarray) -> list[np.ndarray]:

@@ -138,3 +138,29 @@ def test_inside_any_closed_counts_corners_and_edges() -> None:
                                                            False, False]
     assert hk.inside_any(pts, xy, faces, cand, closed=True).tolist() == [True, True, True,
                                                                         True, False, False]
+
+
+def test_grid_triangle_depths_take_each_vertex_from_a_triangle_of_its_piece() -> None:
+    from asrbf_mesh._holes_kernels import grid_triangle_depths
+
+    g = np.array([0.0, 1.0, 2.0])  # a 3 x 3 grid, nodes row-major: node = 3 j + i
+    corners = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    square = np.column_stack([corners, corners[:, 0] + 2.0 * corners[:, 1]])  # z = x + 2 y
+    xyz = np.vstack([square, square[[0, 1, 3]] + [0.0, 0.0, 10.0]])  # the same, 10 higher
+    faces = np.array([[0, 1, 2], [0, 2, 3],   # piece 0: the square
+                      [4, 5, 6],              # piece 1: its lower-left half, 10 higher
+                      [1, 2, 3]])             # no piece: never used
+    piece = np.array([0, 0, 1, -1])
+    key = np.array([0 * 9 + 4,    # piece 0, node (1, 1): 3
+                    1 * 9 + 4,    # piece 1, node (1, 1): on its hypotenuse, 13
+                    1 * 9 + 8,    # piece 1, node (2, 2): outside its triangle
+                    -1,           # skipped
+                    0 * 9 + 2])   # piece 0, node (2, 0): a corner, 2
+    depth, tri = grid_triangle_depths(g, g, xyz, faces, piece, key)
+    assert np.allclose(depth[[0, 1, 4]], [3.0, 13.0, 2.0])
+    assert np.isnan(depth[[2, 3]]).all() and tri[[2, 3]].tolist() == [-1, -1]
+    assert tri[0] in (0, 1) and tri[1] == 2 and tri[4] == 0
+    with pytest.raises(ValueError, match="one piece per triangle"):
+        grid_triangle_depths(g, g, xyz, faces, piece[:2], key)
+    with pytest.raises(ValueError, match="indexes a point"):
+        grid_triangle_depths(g, g, xyz, faces + 10, piece, key)

@@ -420,3 +420,31 @@ def test_a_vertex_moved_onto_a_sample_takes_its_depth_where_the_network_misses_i
     assert np.allclose(pts[47, :2], [0.3, 0.4])  # the sample there
     assert out[0, 2] == pts[47, 2] and out[0, :2].tolist() == [0.3, 0.4]
     assert out[1:].tolist() == v[1:].tolist()
+
+
+def test_a_vertex_in_a_scan_triangle_takes_its_depth_where_the_network_rings() -> None:
+    """The network misses the scan's plane by a bump 10 E high: the vertices over the bump
+    (over 2 E off) take the plane's depth and normal, the rest keep the network's."""
+    from asrbf_mesh._config import FitConfig
+    from asrbf_mesh._frame import Frame
+    from asrbf_mesh._surface import SNAP_MISS
+
+    cfg = FitConfig()
+    e = cfg.error_threshold
+    net = am.Network(0.0, np.array([[0.5, 0.5]]), np.array([0.1]), np.array([10.0 * e]),
+                     Frame(np.eye(3), np.zeros(3), np.ones(3)), cfg)
+    g = np.linspace(0.0, 1.0, 21)
+    x, y = np.meshgrid(g, g)
+    scan = am.Scan(np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)]),
+                   grid_faces(21, 21))
+    mesh = reconstruct(net, footprint=scan, spacing_abs=0.02)
+    f = net.evaluate(mesh.vertices[:, :2])
+    off = np.abs(f) > SNAP_MISS * e
+    assert 10 < off.sum() < 0.2 * len(f)
+    assert np.all(mesh.vertices[off, 2] == 0.0)
+    assert np.allclose(mesh.vertex_normals[off], [0.0, 0.0, 1.0])
+    assert np.allclose(mesh.vertices[~off, 2], f[~off])
+    # no triangles, or the whole square: the network's surface everywhere
+    for kwargs in ({"footprint": scan.points}, {"footprint": scan, "mode": "full"}):
+        plain = reconstruct(net, spacing_abs=0.02, **kwargs)
+        assert np.allclose(plain.vertices[:, 2], net.evaluate(plain.vertices[:, :2]))
