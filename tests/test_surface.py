@@ -448,3 +448,23 @@ def test_a_vertex_in_a_scan_triangle_takes_its_depth_where_the_network_rings() -
     for kwargs in ({"footprint": scan.points}, {"footprint": scan, "mode": "full"}):
         plain = reconstruct(net, spacing_abs=0.02, **kwargs)
         assert np.allclose(plain.vertices[:, 2], net.evaluate(plain.vertices[:, :2]))
+
+
+def test_a_vertex_between_two_sheets_takes_a_shelf_from_the_nearest_sample() -> None:
+    """A slit between sheets at depths 0 and 1: a vertex in it at the ramp's depth 0.5,
+    no sample's within 0.2 of it, rises over its nearest sample's depth by at most its
+    distance from it; one at a sample's depth, or of a piece with no sample near, stays."""
+    from asrbf_mesh._surface import _gap_shelves
+
+    g = np.linspace(0.0, 1.0, 11)
+    x, y = np.meshgrid(g, g)
+    pts = np.column_stack([x.ravel(), y.ravel(), (y.ravel() > 0.5).astype(float)])
+    faces = grid_faces(11, 11)
+    faces = faces[np.ptp(pts[faces, 2], axis=1) == 0.0]  # no triangle across the slit
+    v = np.array([[0.5, 0.52, 0.5],    # in the slit, on the ramp: nearest sample (0.5, 0.5)
+                  [0.5, 0.52, 0.03],   # in the slit at the lower sheet's depth
+                  [0.5, 0.52, 0.5]])   # the same as the first, of another piece
+    gap, depth = _gap_shelves(v, np.array([0, 0, 1]), pts, faces, np.zeros(len(pts), int),
+                              0.15, 0.2)
+    assert gap.tolist() == [0]
+    assert depth[0] == pytest.approx(0.02)  # the sample's depth 0 + its distance 0.02
