@@ -96,6 +96,30 @@ def test_any_fit_is_finite_and_no_worse_than_a_constant(pts, scale, cfg, seed) -
 
 @pytest.mark.filterwarnings("ignore::asrbf_mesh.HeightFieldWarning")
 @PROPERTY
+@given(pts=fields, scale=scales, seed=st.integers(0, 2**31),
+       spacing=st.sampled_from([0.3, 1.0, 2.5]))
+def test_a_reconstruction_on_the_scans_triangles_is_finite(pts, scale, seed, spacing) -> None:
+    """On the scan's own triangles (the default, where vertices may take the scan's depth
+    or a shelf), any fit's reconstruction and LOD levels have finite vertices, unit
+    normals and valid triangles, at grids finer and coarser than the scan."""
+    from scipy.spatial import Delaunay
+
+    sxy, sz, shift = scale
+    pts = pts * np.array([sxy, sxy * 0.7, sz]) + shift
+    net = am.fit(pts, seed=seed, progress=False, passes=1)
+    scan = am.Scan(pts, Delaunay(pts[:, :2]).simplices)
+    step = spacing * float(np.ptp(pts[:, 0])) / np.sqrt(len(pts))
+    for mode in ("surface", "scan"):
+        mesh = am.reconstruct(net, footprint=scan, mode=mode, spacing_abs=step)
+        assert np.all(np.isfinite(mesh.vertices))
+        assert np.allclose(np.linalg.norm(mesh.vertex_normals, axis=1), 1.0)
+        assert mesh.faces.min() >= 0 and mesh.faces.max() < len(mesh.vertices)
+    lod = am.lod_set(scan, levels=2, net=net, seed=seed)
+    assert all(np.all(np.isfinite(lv.mesh.vertices)) for lv in lod)
+
+
+@pytest.mark.filterwarnings("ignore::asrbf_mesh.HeightFieldWarning")
+@PROPERTY
 @given(pts=fields, seed=st.integers(0, 2**31))
 def test_save_load_evaluate_is_exact(tmp_path_factory, pts, seed) -> None:
     net = am.fit(pts, seed=seed, progress=False, passes=1)
