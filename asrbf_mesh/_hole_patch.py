@@ -270,7 +270,14 @@ def _residual_spline(ctx: Ctx, ring: np.ndarray, fnet: Network, centre: np.ndarr
 # reference: views 70.2 % / 0.1660, dev 81.8 % / 0.1449): views t = 2, 5, 10: 70.6 / 70.9 /
 # 73.2 %, pooled 0.1655 / 0.1659 / 0.1709 (worst 0.498 at 10); dev t = 3, 6: 81.2 % /
 # 0.1459 and 81.2 % / 0.1490 (the face map 74 % with each); the best t of 0, 2, 5 per hole
-# (an oracle) 73.2 % of the views' holes.
+# (an oracle) 73.2 % of the views' holes. Both splines with a quadratic term (2026-11-30,
+# for the shafts and domes of the bone and airplane views, where the thin plate sags
+# or bulges across large holes), below Poisson on / pooled RMS: views of three other
+# models (seeds 0-9, 147 holes) 63.3 -> 65.3 % / 0.0934 -> 0.0918, dev scans 81.8 ->
+# 81.8 % / 0.1442 -> 0.1441, the dev scans' seeds 10-19 72.7 -> 72.2 % / 0.1745 -> 0.1752:
+# not kept. The worst of those holes are not the spline's: a bone's condyle whose ring's
+# own curvature (a least-squares quadric through it) overshoots the truth by more
+# than the thin plate does, a crest of the airplane's fuselage left outside the ring.
 _CUBIC = 0.5
 _MIN_NZ = 0.15
 _FLAT = 0.5
