@@ -9,6 +9,7 @@ and learns them (:mod:`asrbf_mesh._pieces`), or learns the paper's single networ
 
 from __future__ import annotations
 
+import threading
 import time
 import warnings
 from collections.abc import Callable
@@ -27,7 +28,7 @@ from ._learn import MIN_POINTS, fit_info, learn_polished, polish_kind, residuals
 from ._mesh import Mesh
 from ._network import FitInfo, Network
 from ._outliers import OutlierWarning, describe_isolated, isolated_points
-from ._pieces import learn_pieces, refine_tails
+from ._pieces import DataShapes, learn_pieces, parallel_pieces, refine_tails
 from ._segment import Segmentation, depth_quanta, segment
 from ._validate import check_choice, check_points, check_seed
 from ._version import __version__
@@ -222,17 +223,27 @@ def _fit_single(hf: HeightField, cfg: FitConfig, polish: str, seed: int,
                 source: str | None, sha: str, seed_out: int, outliers: int | None, *,
                 refine: bool = False, loose: np.ndarray | None = None) -> Network:
     refine = refine and polish != "none"
-    learned, pr, params, polish_seconds = learn_polished(
-        hf, cfg, polish, seed=seed, progress=progress, order=order,
-        keep_residual=refine)  # one piece: no weak neuron dropped (see TAIL_PRUNE)
-    added = 0
-    if refine:
-        tr = time.perf_counter()
-        quanta = depth_quanta(hf.z)
-        params, added = refine_tails(hf, cfg, *params, learned.d_min, pr,
-                                     None if quanta is None else quanta.at(hf.z),
-                                     no_more=True, loose=loose)
-        polish_seconds += time.perf_counter() - tr
+    # the tails' data shapes, measured beside the learning (which runs on one core)
+    shapes = DataShapes(hf) if refine and parallel_pieces() else None
+    beside = threading.Thread(target=shapes.run, daemon=True) if shapes else None
+    if beside is not None:
+        beside.start()
+    try:
+        learned, pr, params, polish_seconds = learn_polished(
+            hf, cfg, polish, seed=seed, progress=progress, order=order,
+            keep_residual=refine)  # one piece: no weak neuron dropped (see TAIL_PRUNE)
+        added = 0
+        if refine:
+            tr = time.perf_counter()
+            quanta = depth_quanta(hf.z)
+            params, added = refine_tails(hf, cfg, *params, learned.d_min, pr,
+                                         None if quanta is None else quanta.at(hf.z),
+                                         no_more=True, loose=loose, shapes=shapes)
+            polish_seconds += time.perf_counter() - tr
+    finally:
+        if beside is not None:
+            shapes.take()  # stops it after the chunk in hand
+            beside.join()
     a0, centers, widths, weights = params
     net = Network(a0, centers, widths, weights, hf.frame, cfg, learned.log)
     res = residuals(net, hf)

@@ -601,3 +601,65 @@ def test_a_reconstruction_stays_on_the_samples_where_the_surface_falls_away() ->
     mesh = am.reconstruct(net, footprint=scan)
     d = point_mesh_distance(pts, mesh) / scan.bbox_diagonal
     assert np.percentile(d, 99.9) < 0.003
+
+
+def test_the_tails_take_the_data_shapes_measured_beside_the_learning() -> None:
+    # measured in chunks beside the learning, stopped at any chunk: the same shapes as
+    # the tails measure point by point, and the same network whether it ran or not
+    import threading
+
+    import asrbf_mesh._pieces as P
+    from asrbf_mesh._config import FitConfig
+    from asrbf_mesh._grid_knn import point_grid
+    from asrbf_mesh._polish import polish_weights
+
+    hf = _half_cylinder(61)
+    scale = np.asarray(hf.frame.scale, dtype=np.float64)
+    whole = P._data_shape(hf, point_grid(hf.xy), np.arange(hf.n_points), scale)
+    done = P.DataShapes(hf)
+    done.run()
+    grid, shape = done.take()
+    assert np.array_equal(shape, whole) and grid[0].shape == point_grid(hf.xy)[0].shape
+
+    unstarted = P.DataShapes(hf)
+    assert unstarted.take() is None
+    unstarted.run()  # stopped before it began: measures nothing
+    assert unstarted.take() is None
+
+    old = P._SHAPE_CHUNK
+    P._SHAPE_CHUNK = 500
+    try:
+        part = P.DataShapes(hf)
+        calls = []
+        real = P._data_shape
+
+        def counted(*args):  # stop it from inside its third chunk
+            calls.append(1)
+            if len(calls) == 3:
+                threading.Thread(target=lambda: setattr(part, "_stop", True)).start()
+            return real(*args)
+
+        P._data_shape = counted
+        try:
+            part.run()
+        finally:
+            P._data_shape = real
+        _, got = part.take()
+        measured = ~np.isnan(got[:, 0])
+        assert 0 < measured.sum() < hf.n_points and np.array_equal(got[measured],
+                                                                   whole[measured])
+    finally:
+        P._SHAPE_CHUNK = old
+
+    cfg = FitConfig().replace(error_threshold=0.002)
+    rng = np.random.default_rng(3)
+    k = 40
+    pr = polish_weights(hf.xy, hf.z, 0.0, rng.random((k, 2)), np.full(k, 0.15),
+                        rng.normal(0.0, 0.05, k), cfg.support, cfg.polish_ridge)
+    args = (hf, cfg, pr.a0, pr.centers, pr.widths, pr.weights, 0.03, pr)
+    plain = P.refine_tails(*args)
+    for shapes in (done, part, unstarted):
+        given = P.refine_tails(*args, shapes=shapes)
+        assert given[1] == plain[1] > 0
+        assert all(np.array_equal(a, b) for a, b in zip(given[0][1:], plain[0][1:],
+                                                          strict=True))
