@@ -561,11 +561,13 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             return kept
         args = (sub.xy, sub.z, normal.matrix(), normal.atz, a0, centers, widths, weights,
                 cfg.support, cfg.polish_ridge, idle)
-        got = solve_and_drop(*args, base=base, give_back=IDLE_GIVE_BACK, extra=extra)
+        memo: dict = {}  # the second drop takes the first's solve
+        got = solve_and_drop(*args, base=base, give_back=IDLE_GIVE_BACK, extra=extra,
+                             memo=memo)
         if no_more and added and got is not None and len(got[0].widths) >= k_entry:
             # the idle neurons did not pay for the tails: the cheapest go until they have
             got = solve_and_drop(*args, base=base, give_back=NET_GIVE_BACK, extra=extra,
-                                 at_least=len(widths) - k_entry + 1)
+                                 at_least=len(widths) - k_entry + 1, memo=memo)
         if got is not None:
             pr, dropped = got
             if added + dropped == 0 \

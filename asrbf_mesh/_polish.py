@@ -540,7 +540,8 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
                    weights: np.ndarray, support: float, ridge: float, limit: float, *,
                    base: np.ndarray | None = None, give_back: float = 1.0,
                    extra: float = 0.0, normal: bool = False,
-                   at_least: int = 0) -> tuple[PolishResult, int] | None:
+                   at_least: int = 0, memo: dict | None = None
+                   ) -> tuple[PolishResult, int] | None:
     """Solve the weights from normal equations, then drop the neurons hardly needed.
 
     The weights minimize ``||A w - z||^2 + lam ||w - w_now||^2`` (``A'A = ata``,
@@ -561,6 +562,11 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     measured (its ``ebar_before`` NaN; its normal equations, without the dropped
     unknowns, only with ``normal``: their copy took 5 ms at K = 1,500), or None above
     :data:`IDLE_MAX_NEURONS` neurons or when ``M`` is not positive definite.
+
+    ``memo``: a dict kept between calls on the same normal equations, weights and
+    ``base`` that differ only in ``give_back``, ``extra`` and ``at_least``: the solve (the
+    factorization and inverse, or the tiles' sweeps and inverses) is made by the first
+    and taken by the others, whose results are the same numbers as without it.
     """
     import scipy.linalg as sla
 
@@ -571,25 +577,29 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
         return None
     ata = _dense(ata)
     w = np.concatenate([[a0], weights])
+    memo = {} if memo is None else memo
     if k > TILE_ABOVE:
         return _solve_and_drop_tiled(xy, z, ata, atz, w, centers, widths, support, ridge,
-                                     limit, base, give_back, extra, normal, at_least)
-    # one BLAS thread: worker threads left spinning after a threaded factorization
-    # took the cores from the numba kernels that follow it (the piecewise fit of
-    # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without; :mod:`._blas`)
-    with one_blas_thread():
-        chol, info = sla.lapack.dpotrf(_ridged(ata, ridge), lower=1)
-        if info == 0:
-            step, info = sla.lapack.dpotrs(chol, atz - ata @ w, lower=1)
-        if info == 0:
-            inv, info = sla.lapack.dpotri(chol, lower=1)  # its lower triangle
-    if info != 0:
+                                     limit, base, give_back, extra, normal, at_least, memo)
+    if "inv" not in memo:
+        # one BLAS thread: worker threads left spinning after a threaded factorization
+        # took the cores from the numba kernels that follow it (the piecewise fit of
+        # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without; :mod:`._blas`)
+        with one_blas_thread():
+            chol, info = sla.lapack.dpotrf(_ridged(ata, ridge), lower=1)
+            if info == 0:
+                step, info = sla.lapack.dpotrs(chol, atz - ata @ w, lower=1)
+            if info == 0:
+                inv, info = sla.lapack.dpotri(chol, lower=1)  # its lower triangle
+        memo["inv"] = None if info != 0 else (inv, w + step)
+    if memo["inv"] is None:
         return None
-    w = w + step
+    inv, w = memo["inv"][0], memo["inv"][1].copy()
     budget = np.inf
     if base is not None:  # the gain in the sum of squares, from the normal equations
-        gain = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
-        budget = give_back * max(gain, 0.0) + extra
+        if "gain" not in memo:
+            memo["gain"] = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
+        budget = give_back * max(memo["gain"], 0.0) + extra
     dropped = eliminate(inv, w, float(limit), float(budget), int(at_least))
     return _dropped_result(xy, z, w, dropped, centers, widths, support,
                            (ata, atz) if normal else None)
@@ -689,7 +699,7 @@ def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: n
                           w: np.ndarray, centers: np.ndarray, widths: np.ndarray,
                           support: float, ridge: float, limit: float,
                           base: np.ndarray | None, give_back: float, extra: float,
-                          normal: bool = False, at_least: int = 0
+                          normal: bool = False, at_least: int = 0, memo: dict | None = None
                           ) -> tuple[PolishResult, int] | None:
     """:func:`solve_and_drop` by strips of neurons: O(K^3 / T^2) instead of O(K^3).
 
@@ -714,23 +724,37 @@ def _solve_and_drop_tiled(xy: np.ndarray, z: np.ndarray, ata: np.ndarray, atz: n
     from ._network_kernels import eliminate
 
     k = len(widths)
-    tiles = _Tiles(ata, atz, w, centers, ridge)
+    memo = {} if memo is None else memo
+    if "tiles" not in memo:
+        tiles = _Tiles(ata, atz, w, centers, ridge)
+        alive = np.ones(k + 1, dtype=bool)
+        solved = all(tiles.sweep(alive) for _ in range(TILE_SWEEPS))
+        invs = []
+        for factor in tiles.factors if solved else []:
+            with one_blas_thread():
+                inv, info = sla.lapack.dpotri(factor, lower=1)
+            if info != 0:
+                solved = False
+                break
+            invs.append(inv)
+        # what a later call starts from: the swept weights, gains, factors and blocks
+        memo["tiles"] = (tiles, w.copy(), tiles.gains.copy(), list(tiles.factors),
+                         list(tiles._blocks), invs) if solved else None
+    if memo["tiles"] is None:
+        return None
+    tiles, w0, gains, factors, blocks, invs = memo["tiles"]
+    w = tiles.w = w0.copy()
+    tiles.gains, tiles.factors, tiles._blocks = gains.copy(), list(factors), list(blocks)
     alive = np.ones(k + 1, dtype=bool)
-    for _ in range(TILE_SWEEPS):
-        if not tiles.sweep(alive):
-            return None
     budget = np.inf
     if base is not None:
-        gain = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
-        budget = give_back * max(gain, 0.0) + extra
+        if "gain" not in memo:
+            memo["gain"] = _sum_squares(ata, atz, base) - _sum_squares(ata, atz, w)
+        budget = give_back * max(memo["gain"], 0.0) + extra
     share = np.maximum(tiles.gains, 0.0)
     share = share / share.sum() if share.sum() > 0 else np.full(len(share), 1.0 / len(share))
     dropped = []
-    for idx, factor, part in zip(tiles.tiles, tiles.factors, share, strict=True):
-        with one_blas_thread():
-            inv, info = sla.lapack.dpotri(factor, lower=1)
-        if info != 0:
-            return None
+    for idx, inv, part in zip(tiles.tiles, invs, share, strict=True):
         wt = w[idx].copy()
         gone = eliminate(inv, wt, float(limit), float(budget * part if np.isfinite(budget)
                                                       else np.inf),

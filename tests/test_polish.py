@@ -580,3 +580,27 @@ def test_tiled_solve_and_drop_keeps_its_share_of_the_gain(learned, monkeypatch) 
     assert n <= n_whole
     assert got.ebar_after == pytest.approx(mean_abs(hf.xy, hf.z, got.a0, got.centers,
                                                     got.widths, got.weights))
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_a_memo_gives_later_drops_the_first_ones_solve(learned, monkeypatch, tiled) -> None:
+    # drops that differ only in their budget and in how many must go share one solve:
+    # each the same numbers as alone, dense or by tiles
+    import asrbf_mesh._polish as P
+
+    if tiled:
+        monkeypatch.setattr(P, "TILE_ABOVE", 10)
+        monkeypatch.setattr(P, "TILE_NEURONS", 15)
+    hf, st, first, weights = _appended(learned, 8)
+    ata, atz = P.extend_normal(hf.xy, hf.z, first, st.centers, st.widths, weights, 3.5)
+    args = (hf.xy, hf.z, ata, atz, first.a0, st.centers, st.widths, weights, 3.5, 1e-4,
+            1e-3)
+    base = np.r_[first.a0, first.weights, np.zeros(8)]
+    memo: dict = {}
+    for give_back, at_least in ((0.25, 0), (0.75, 5), (0.25, 0), (1.0, 12)):
+        alone = P.solve_and_drop(*args, base=base, give_back=give_back, at_least=at_least)
+        shared = P.solve_and_drop(*args, base=base, give_back=give_back, at_least=at_least,
+                                  memo=memo)
+        assert alone[1] == shared[1] and np.array_equal(alone[0].weights, shared[0].weights)
+        assert np.array_equal(alone[0].residual, shared[0].residual)
+    assert ("tiles" in memo) == tiled and ("inv" in memo) != tiled
