@@ -730,22 +730,29 @@ class DataShapes:
         self._got: tuple[tuple, np.ndarray] | None = None
 
     def run(self) -> None:
-        """Measure every point's shape, chunk by chunk, until done or :meth:`take` stops it."""
+        """Measure every point's shape, chunk by chunk, until done or :meth:`take` stops it.
+
+        A failure stops it quietly: the rows not measured are measured by the tails, which
+        raise the same error where the fit can report it.
+        """
         from ._network_kernels import numba_threads
 
         sub = self.sub
         scale = np.asarray(sub.frame.scale, dtype=np.float64)
-        with numba_threads(1), self._lock:  # (its kernels are serial: no team of threads)
-            if self._stop:
-                return
-            grid = point_grid(sub.xy)
-            self._got = grid, np.full((sub.n_points, 3), np.nan)
-        for c0 in range(0, sub.n_points, _SHAPE_CHUNK):
-            with numba_threads(1), self._lock:
+        try:
+            with numba_threads(1), self._lock:  # (its kernels are serial: no team of threads)
                 if self._stop:
                     return
-                at = np.arange(c0, min(c0 + _SHAPE_CHUNK, sub.n_points))
-                self._got[1][at] = _data_shape(sub, grid, at, scale)
+                grid = point_grid(sub.xy)
+                self._got = grid, np.full((sub.n_points, 3), np.nan)
+            for c0 in range(0, sub.n_points, _SHAPE_CHUNK):
+                with numba_threads(1), self._lock:
+                    if self._stop:
+                        return
+                    at = np.arange(c0, min(c0 + _SHAPE_CHUNK, sub.n_points))
+                    self._got[1][at] = _data_shape(sub, grid, at, scale)
+        except Exception:  # noqa: BLE001 - see above
+            self._stop = True
 
     def take(self) -> tuple[tuple, np.ndarray] | None:
         """Stop :meth:`run` and return (grid, shapes so far), or None if it never began."""

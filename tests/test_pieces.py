@@ -651,6 +651,14 @@ def test_the_tails_take_the_data_shapes_measured_beside_the_learning() -> None:
     finally:
         P._SHAPE_CHUNK = old
 
+    failed = P.DataShapes(hf)  # a failure beside the learning stops it quietly
+    P._data_shape = lambda *args: 1 / 0
+    try:
+        failed.run()
+    finally:
+        P._data_shape = real
+    assert np.isnan(failed.take()[1]).all()
+
     cfg = FitConfig().replace(error_threshold=0.002)
     rng = np.random.default_rng(3)
     k = 40
@@ -658,7 +666,7 @@ def test_the_tails_take_the_data_shapes_measured_beside_the_learning() -> None:
                         rng.normal(0.0, 0.05, k), cfg.support, cfg.polish_ridge)
     args = (hf, cfg, pr.a0, pr.centers, pr.widths, pr.weights, 0.03, pr)
     plain = P.refine_tails(*args)
-    for shapes in (done, part, unstarted):
+    for shapes in (done, part, unstarted, failed):
         given = P.refine_tails(*args, shapes=shapes)
         assert given[1] == plain[1] > 0
         assert all(np.array_equal(a, b) for a, b in zip(given[0][1:], plain[0][1:],
