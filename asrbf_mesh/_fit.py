@@ -28,8 +28,9 @@ from ._learn import MIN_POINTS, fit_info, learn_polished, polish_kind, residuals
 from ._mesh import Mesh
 from ._network import FitInfo, Network
 from ._outliers import OutlierWarning, describe_isolated, isolated_points
-from ._pieces import DataShapes, learn_pieces, parallel_pieces, refine_tails
+from ._pieces import learn_pieces, parallel_pieces, refine_tails
 from ._segment import Segmentation, depth_quanta, segment
+from ._tail_shapes import DataShapes
 from ._validate import check_choice, check_points, check_seed
 from ._version import __version__
 from .errors import ConfigError, ScanError

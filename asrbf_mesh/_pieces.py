@@ -50,9 +50,10 @@ from ._polish import (
     solve_and_drop,
 )
 from ._segment import Segmentation, depth_quanta
+from ._tail_shapes import DataShapes, across, past_border
 from ._validate import progress as progress_bar
 
-__all__ = ["DataShapes", "PiecesLearned", "learn_pieces", "parallel_pieces", "piece_seed",
+__all__ = ["PiecesLearned", "learn_pieces", "parallel_pieces", "piece_seed",
            "refine_tails", "small_piece"]
 
 #: Tail refinement: points whose error exceeds this multiple of E get neurons.
@@ -137,6 +138,10 @@ IDLE_GIVE_BACK = 0.25
 IDLE_NOISE_SHARE = 0.1
 #: Tail refinement: after the drop, points above this multiple of the threshold get neurons.
 REFILL_FACTOR = 1.5
+#: Tail refinement of a scan of one piece: when the drop raised the mean error above the
+#: polished network's (its sum of squares still below), the drops are made again within
+#: these shares of the first budget, in turn, until the mean error falls.
+RETRY_SHARES = (0.25, 0.0625)
 #: Tail refinement: the result is kept unless its mean error exceeds the polished
 #: network's by more than this fraction (the budget keeps its sum of squared errors below
 #: the polished network's, but the mean error may still rise a little). Was 1.0 (a guard
@@ -148,18 +153,10 @@ IDLE_TOLERANCE = 0.01
 #: The same where depths come in levels: there the drop gives back a share of the
 #: polished sum on purpose (``IDLE_NOISE_SHARE``), and the mean error may rise by it.
 IDLE_TOLERANCE_LEVELS = 1.0
-#: Tail refinement: the data's slope at a point is a plane through this many samples.
-_SLOPE_NEIGHBOURS = 8
-#: Tail refinement: a point whose 8 nearest samples leave a gap of directions wider than
-#: this (radians) lies on its piece's border: 180 degrees on a straight border of a
-#: range grid, 45 inside it (:func:`_data_shape`).
-BORDER_GAP = np.deg2rad(160.0)
 #: Tail refinement: points sampled for the noise scale.
 _NOISE_SAMPLE = 4096
 #: Tail refinement: candidates looked at per round, worst first.
 _TAIL_CANDIDATES = 4096
-#: :class:`DataShapes` measures this many points between two looks at whether to stop.
-_SHAPE_CHUNK = 4096
 
 
 def piece_seed(seed: int, piece: int) -> int:
@@ -385,10 +382,11 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     Each round takes the points whose error across the surface (the depth error times
     the cosine of the slope, in physical proportions; at the piece's border where the
     perpendicular onto the surface would land past it, the whole depth error, unless
-    the point is ``loose``, in no scan triangle: :func:`_across`) exceeds ``max(TAIL_FACTOR E,
-    TAIL_NOISE x 1.4826 MAD)`` (MAD over a sample of the points: the piece's noise),
-    and where the depths come in levels, ``TAIL_QUANTA`` x ``quantum`` (the depth
-    quantum at each point, :func:`~asrbf_mesh._segment.depth_quanta`), worst first and
+    the point is ``loose``, in no scan triangle: :func:`~asrbf_mesh._tail_shapes.across`)
+    exceeds ``max(TAIL_FACTOR E, TAIL_NOISE x 1.4826 MAD)`` (MAD over a sample of the
+    points: the piece's noise), and where the depths come in levels, ``TAIL_QUANTA`` x
+    ``quantum`` (the depth quantum at each point,
+    :func:`~asrbf_mesh._segment.depth_quanta`), worst first and
     no two closer than D_min (with levels, or where the first round's misses are many,
     lone and small (:data:`NOISY_MIN_POINTS`), only points where ``TAIL_SUPPORT`` of the 8 nearest
     miss on the same side too: :func:`_supported`); each becomes
@@ -478,7 +476,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             upper = float(np.partition(np.abs(res[sample]), len(sample) // 2)[len(sample) // 2])
             mad = 0.0
             if TAIL_NOISE * 1.4826 * upper > floor:
-                some = _across(piece, sub, res, sample, scale, cfg.support, grid, shape,
+                some = across(piece, sub, res, sample, scale, cfg.support, grid, shape,
                                loose)
                 mad = float(np.median(np.abs(some - np.median(some))))
             limit = max(TAIL_FACTOR * cfg.error_threshold, TAIL_NOISE * 1.4826 * mad)
@@ -486,7 +484,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
                 limit = np.maximum(limit, TAIL_QUANTA * quantum)
         above = factor * limit
         worst = np.flatnonzero(np.abs(res) > above)  # the error across is at most |res|
-        off = _across(piece, sub, res, worst, scale, cfg.support, grid, shape, loose)
+        off = across(piece, sub, res, worst, scale, cfg.support, grid, shape, loose)
         keep = off > (above[worst] if isinstance(above, np.ndarray) else above)
         worst, off = worst[keep], off[keep]
         if supported and len(worst):
@@ -517,7 +515,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         sigma = np.maximum(cfg.psi * near, 0.5 * d_min)
         # a neuron for a point past its border stands half its width further out: its
         # flank, not its peak, follows the surface turning away there
-        past = _past_border(piece.eval_unit(new, cfg.support, True)[1], res[picked],
+        past = past_border(piece.eval_unit(new, cfg.support, True)[1], res[picked],
                             shape[picked, 1:], scale, None if loose is None else loose[picked])
         if past.any():
             out = shape[picked[past], 1:] / scale[:2]
@@ -563,34 +561,55 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             return kept
         args = (sub.xy, sub.z, normal.matrix(), normal.atz, a0, centers, widths, weights,
                 cfg.support, cfg.polish_ridge, idle)
-        memo: dict = {}  # the second drop takes the first's solve
-        got = solve_and_drop(*args, base=base, give_back=IDLE_GIVE_BACK, extra=extra,
-                             memo=memo)
-        if no_more and added and got is not None and len(got[0].widths) >= k_entry:
-            # the idle neurons did not pay for the tails: the cheapest go until they have
-            got = solve_and_drop(*args, base=base, give_back=NET_GIVE_BACK, extra=extra,
-                                 at_least=len(widths) - k_entry + 1, memo=memo)
-        if got is not None:
+        memo: dict = {}  # the drops after the first take its solve
+
+        def drop(share: float):
+            """Drop within ``share`` of the budgets, then refill: (parameters, added).
+
+            Or "unsolved" (no drop could be made), "kept" (too few dropped: a smaller
+            drop cannot pay either), None (the mean error rose).
+            """
+            nonlocal room
+            got = solve_and_drop(*args, base=base, give_back=IDLE_GIVE_BACK * share,
+                                 extra=extra, memo=memo)
+            if no_more and added and got is not None and len(got[0].widths) >= k_entry:
+                # the idle neurons did not pay for the tails: the cheapest go until they have
+                got = solve_and_drop(*args, base=base, give_back=NET_GIVE_BACK * share,
+                                     extra=extra, at_least=len(widths) - k_entry + 1,
+                                     memo=memo)
+            if got is None:
+                return "unsolved"
             pr, dropped = got
-            if added + dropped == 0 \
-                    or pr.ebar_after > polished.ebar_after * (1.0 + tolerance) \
-                    or no_more and len(pr.widths) >= k_entry:
-                # nothing changed, or the tails did not pay: the polished network
-                return kept
+            if added + dropped == 0 or no_more and len(pr.widths) >= k_entry:
+                return "kept"  # nothing changed, or the tails did not pay
+            if pr.ebar_after > polished.ebar_after * (1.0 + tolerance):
+                return None
             out, n = (pr.a0, pr.centers, pr.widths, pr.weights), 0
             if dropped and len(pr.widths) and TAIL_ROUNDS:
                 # a last round for the points the dropped neurons left above the threshold
                 room = k_entry - 1 if no_more else None
-                centers, widths, weights, n = one_round(pr.a0, pr.centers, pr.widths,
-                                                        pr.weights, REFILL_FACTOR,
-                                                        pr.residual)
-                out = (pr.a0, centers, widths, weights)
+                c, w, a, n = one_round(pr.a0, pr.centers, pr.widths, pr.weights,
+                                       REFILL_FACTOR, pr.residual)
+                out = (pr.a0, c, w, a)
             # (where depths come in levels the drop gives back noise on purpose: as above)
             if no_more and quantum is None and np.abs(
                     sub.z - Piece(*out).eval_unit(sub.xy, cfg.support)[0]
             ).mean() >= polished.ebar_after:
-                return kept
+                return None
             return out, added + n
+
+        # a scan of one piece whose drop raised the mean error (its sum of squares falls,
+        # the mean of |error| may rise): the drop again within smaller shares of its
+        # budget, fewer and cheaper neurons, until one pays (:data:`RETRY_SHARES`)
+        for share in (1.0, *RETRY_SHARES) if no_more else (1.0,):
+            made = drop(share)
+            if made == "unsolved" and share == 1.0:
+                break  # (below)
+            if made is None:
+                continue
+            return kept if isinstance(made, str) else made
+        else:
+            return kept  # the polished network was better
         if added == 0:
             return (a0, centers, widths, weights), 0
         pr = extend_and_solve(sub.xy, sub.z, polished, a0, centers, widths, weights,
@@ -663,129 +682,3 @@ def _supported(xy: np.ndarray, res: np.ndarray, at: np.ndarray,
     lim = above[nb] if isinstance(above, np.ndarray) else above
     side = res[nb] * np.sign(res[at])[:, None]
     return (side > lim).sum(axis=1) - 1 >= TAIL_SUPPORT
-
-
-def _across(piece: Piece, sub: HeightField, res: np.ndarray, at: np.ndarray,
-            scale: np.ndarray, support: float, grid: tuple, shape: np.ndarray,
-            loose: np.ndarray | None = None) -> np.ndarray:
-    """Return the error across the surface at points ``at``, not along the view.
-
-    A steep point whose depth is off by 5 E may lie within E of the surface: the depth
-    error times the cosine of the slope, the slope taken in physical proportions. The
-    slope is the smaller of the network's and the data's (a plane through the point's
-    eight nearest samples, ``grid`` the piece's points binned): a network that swings
-    steeply where the scan does not is off by its whole depth error. So is a point on
-    the piece's border whose perpendicular onto the surface would land past the border
-    (its foot moves by ``r grad f / (1 + |grad f|^2)`` in the view plane, ``r`` the depth
-    error): the surface ends there, and the point is as far from it as its depth error
-    (at the silhouettes of two cow views the pieces' networks missed such points by
-    0.7-1.3 E, all on one side, and the reconstruction's 99.9th percentile of scan ->
-    mesh distances stood at 0.62-0.66 % of the diagonal). ``shape`` holds per point the
-    data's squared slope and the outward direction of the border (zero inside; NaN rows
-    not yet measured, filled here: the data do not change between rounds). A point in no
-    scan triangle (``loose``: a flying pixel, a lone return) is no surface's border: on
-    the face map half the points the rule took were such.
-    """
-    if len(at) == 0:
-        return np.zeros(0)
-    grad = piece.eval_unit(sub.xy[at], support, True)[1]
-    net = grad * (scale[2] / scale[:2])
-    new = at[np.isnan(shape[at, 0])]
-    if len(new):
-        shape[new] = _data_shape(sub, grid, new, scale)
-    s2 = np.minimum(np.einsum("ij,ij->i", net, net), shape[at, 0])
-    past = _past_border(grad, res[at], shape[at, 1:], scale,
-                        None if loose is None else loose[at])
-    return np.abs(res[at]) / np.sqrt(1.0 + np.where(past, 0.0, s2))
-
-
-def _past_border(grad: np.ndarray, res: np.ndarray, outward: np.ndarray, scale: np.ndarray,
-                 loose: np.ndarray | None) -> np.ndarray:
-    """Whether each point's perpendicular onto the surface lands past its piece's border.
-
-    ``grad``: the network's gradient at the points (unit square), ``res`` their depth
-    errors, ``outward`` the border's outward direction (zero inside, :func:`_data_shape`);
-    ``loose`` points (in no scan triangle) never.
-    """
-    past = np.einsum("ij,ij->i", grad * (scale[2] / scale[:2]), outward) * res > 0.0
-    return past if loose is None else past & ~loose
-
-
-class DataShapes:
-    """:func:`_data_shape` at every point of a piece, measured beside its learning.
-
-    :meth:`run` (on a core the learning leaves idle: sequential learning runs on one)
-    measures the points in chunks of :data:`_SHAPE_CHUNK`; :meth:`take` (by
-    :func:`refine_tails`, when its first round starts) stops it after the chunk in hand
-    and returns the piece's point grid and the shapes measured so far (rows not reached
-    NaN, which the rounds measure as they need them: the same numbers either way), or
-    None if it had not started. The face map's main piece (83,000 points): about 80 ms
-    beside a learning of 155 ms, where its tails measured 13 ms of it point by point.
-    """
-
-    def __init__(self, sub: HeightField):
-        import threading
-
-        self.sub = sub
-        self._lock = threading.Lock()
-        self._stop = False
-        self._got: tuple[tuple, np.ndarray] | None = None
-
-    def run(self) -> None:
-        """Measure every point's shape, chunk by chunk, until done or :meth:`take` stops it.
-
-        A failure stops it quietly: the rows not measured are measured by the tails, which
-        raise the same error where the fit can report it.
-        """
-        from ._network_kernels import numba_threads
-
-        sub = self.sub
-        scale = np.asarray(sub.frame.scale, dtype=np.float64)
-        try:
-            with numba_threads(1), self._lock:  # (its kernels are serial: no team of threads)
-                if self._stop:
-                    return
-                grid = point_grid(sub.xy)
-                self._got = grid, np.full((sub.n_points, 3), np.nan)
-            for c0 in range(0, sub.n_points, _SHAPE_CHUNK):
-                with numba_threads(1), self._lock:
-                    if self._stop:
-                        return
-                    at = np.arange(c0, min(c0 + _SHAPE_CHUNK, sub.n_points))
-                    self._got[1][at] = _data_shape(sub, grid, at, scale)
-        except Exception:  # noqa: BLE001 - see above
-            self._stop = True
-
-    def take(self) -> tuple[tuple, np.ndarray] | None:
-        """Stop :meth:`run` and return (grid, shapes so far), or None if it never began."""
-        self._stop = True
-        with self._lock:  # waits for the chunk in hand
-            return self._got
-
-
-def _data_shape(sub: HeightField, grid: tuple, at: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Return the data's squared slope at points ``at`` and the border's outward direction.
-
-    The slope: a plane through the point's nearest samples. The border: where the
-    directions to the point's 8 nearest other samples (physical proportions) leave a gap
-    wider than :data:`BORDER_GAP`, the unit vector halving it; zero elsewhere. ``grid`` is
-    :func:`~asrbf_mesh._grid_knn.point_grid` of the piece's points.
-    """
-    from ._grid_knn import knn, plane_slopes
-
-    ratio = scale[2] / scale[:2]
-    out = np.zeros((len(at), 3))
-    k = min(_SLOPE_NEIGHBOURS, sub.n_points)
-    out[:, 0] = plane_slopes(sub.xy, sub.z, at, k, float(ratio[0]), float(ratio[1]), *grid)
-    if sub.n_points < 4:
-        return out
-    _, nb = knn(sub.xy, at, min(9, sub.n_points), grid)
-    d = (sub.xy[nb[:, 1:]] - sub.xy[at, None]) * scale[:2]
-    ang = np.sort(np.arctan2(d[..., 1], d[..., 0]), axis=1)
-    gaps = np.diff(np.concatenate([ang, ang[:, :1] + 2.0 * np.pi], axis=1), axis=1)
-    j = np.argmax(gaps, axis=1)
-    rows = np.arange(len(at))
-    wide = gaps[rows, j] > BORDER_GAP
-    mid = ang[rows, j] + 0.5 * gaps[rows, j]
-    out[wide, 1], out[wide, 2] = np.cos(mid[wide]), np.sin(mid[wide])
-    return out
