@@ -461,16 +461,22 @@ def test_a_child_forked_after_a_fit_fits_the_same_bytes() -> None:
     assert got == ref
 
 
+def _one_piece_grid(k: int) -> tuple[np.ndarray, am.Network, am.Network]:
+    """A 100 x 100 grid of sin(k pi x) cos(k pi y), its single network and pieces (seed 0)."""
+    g = np.linspace(0.0, 1.0, 100)
+    x, y = np.meshgrid(g, g)
+    pts = np.c_[x.ravel(), y.ravel(), (np.sin(k * np.pi * x) * np.cos(k * np.pi * y)).ravel()]
+    single = am.fit(pts, seed=0, pieces=1, progress=False)
+    auto = am.fit(pts, seed=0, progress=False)
+    assert auto.n_pieces == 1
+    return pts, single, auto
+
+
 def test_one_smooth_piece_is_no_worse_than_the_single_network() -> None:
     # a steep smooth grid: one piece, so the default model is the single network with its
     # tails refined; weak neurons pruned before the polish (the old rule) raised E-bar
     # 0.00201 -> 0.00252
-    g = np.linspace(0.0, 1.0, 100)
-    x, y = np.meshgrid(g, g)
-    pts = np.c_[x.ravel(), y.ravel(), (np.sin(3 * np.pi * x) * np.cos(3 * np.pi * y)).ravel()]
-    single = am.fit(pts, seed=0, pieces=1, progress=False)
-    auto = am.fit(pts, seed=0, progress=False)
-    assert auto.n_pieces == 1
+    _, single, auto = _one_piece_grid(3)
     assert auto.info["ebar"] <= 1.01 * single.info["ebar"]
     assert auto.n_neurons <= single.n_neurons
 
@@ -535,12 +541,7 @@ def test_a_one_piece_drop_that_raises_the_mean_error_is_made_again_smaller(monke
     # the drop made again within a quarter of its budget pays
     import asrbf_mesh._pieces as pieces_mod
 
-    g = np.linspace(0.0, 1.0, 100)
-    x, y = np.meshgrid(g, g)
-    pts = np.c_[x.ravel(), y.ravel(), (np.sin(2 * np.pi * x) * np.cos(2 * np.pi * y)).ravel()]
-    single = am.fit(pts, seed=0, pieces=1, progress=False)
-    auto = am.fit(pts, seed=0, progress=False)
-    assert auto.n_pieces == 1
+    pts, single, auto = _one_piece_grid(2)
     assert auto.n_neurons < 0.9 * single.n_neurons
     assert auto.info["ebar"] < single.info["ebar"]
     monkeypatch.setattr(pieces_mod, "RETRY_SHARES", ())
