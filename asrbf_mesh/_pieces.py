@@ -422,7 +422,8 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     cheapest whatever each costs, within ``NET_GIVE_BACK`` of the tails' gain, until one
     fewer is left; the last round stays under that count, and the result is kept only
     with fewer neurons and (without depth levels) a lower mean error than the polished
-    network, which is returned otherwise.
+    network, which is returned otherwise; a drop that raised the mean error is first made
+    again within smaller shares of its budgets (:data:`RETRY_SHARES`).
 
     ``shapes``: a :class:`DataShapes` of ``sub`` running beside the learning: the shapes it
     measured are taken, the rest measured point by point as the rounds need them.
