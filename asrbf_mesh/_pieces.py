@@ -46,6 +46,7 @@ from ._polish import (
     appended_rows,
     drop_idle,
     extend_and_solve,
+    extend_normal,
     polish_weights,
     solve_and_drop,
 )
@@ -414,8 +415,11 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     polish solves them and :func:`~asrbf_mesh._polish.drop_idle` drops. A piece whose
     weight polish had too many neurons for dense normal equations
     (:data:`~asrbf_mesh._polish.DENSE_MAX`) is kept as polished, with no tails: a second
-    sparse solve would cost as much as the polish and nothing could be dropped after it,
-    and no piece's tails grow it to that many.
+    sparse solve would cost as much as the polish, and no piece's tails grow it to that
+    many; but a scan of one piece (``no_more``) gets its tails, solved and dropped strip
+    by strip from the sparse equations (``solve_and_drop(strips=True)``): on the SRTM
+    tile (138,632 points), seeds 0-2, the single network's K 6,552, 6,578, 6,546 and E-bar
+    0.0085 became 6,523, 6,563, 6,520 and 0.0073, in 1.09-1.13x its time.
 
     With ``no_more`` (a scan of one piece) the tails must pay for themselves: when the
     drop leaves as many neurons as the polished network had, a second drop takes the
@@ -430,12 +434,14 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
     """
     from scipy.spatial import cKDTree
 
-    if polished is not None and polished.ata is not None \
-            and not isinstance(polished.ata, np.ndarray):
-        # too many neurons for dense normal equations (the polish solved sparse ones by
-        # conjugate gradients): a second such solve for the tails, with no drop after it,
-        # took an SRTM tile (138,632 points, 6,552 neurons) to 2.3x the single fit's
-        # time and 8,373 neurons; the polished network, as the single network's
+    # too many neurons for dense normal equations (the polish solved sparse ones by
+    # conjugate gradients): a second such solve for the tails, with no drop after it,
+    # took an SRTM tile (138,632 points, 6,552 neurons) to 2.3x the single fit's time
+    # and 8,373 neurons. A piece of several keeps its polished network; a scan of one
+    # piece solves and drops strip by strip from the sparse equations (below)
+    sparse = polished is not None and polished.ata is not None \
+        and not isinstance(polished.ata, np.ndarray)
+    if sparse and not no_more:
         return (a0, centers, widths, weights), 0
     scale = np.asarray(sub.frame.scale, dtype=np.float64)
     grid, shape = None, None
@@ -447,7 +453,7 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
         and isinstance(polished.ata, np.ndarray) \
         and polished.ata.shape[0] == len(widths) + 1 else None
     k_entry = len(widths)
-    if no_more and normal is None:  # no drop possible: more neurons, never fewer
+    if no_more and normal is None and not sparse:  # no drop: more neurons, never fewer
         return (a0, centers, widths, weights), 0
     room: int | None = None  # at most this many neurons after a round (the refill's)
 
@@ -548,9 +554,10 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             break
         added += n
     idle = IDLE_RSS * cfg.error_threshold ** 2
-    if normal is not None:
+    if normal is not None or sparse:
         # the polish's normal equations extended by the new neurons' columns, solved,
-        # and the neurons the network hardly needs dropped, from one dense inverse
+        # and the neurons the network hardly needs dropped, from one dense inverse (or
+        # strip by strip)
         base = np.concatenate([[polished.a0], polished.weights, np.zeros(added)])
         kept = (polished.a0, polished.centers, polished.widths, polished.weights), 0
         extra = _noise_budget(polished, quantum)
@@ -560,8 +567,10 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             # drops would have to lower E-bar: the solve (a tenth of a one-piece fit)
             # would return the polished network
             return kept
-        args = (sub.xy, sub.z, normal.matrix(), normal.atz, a0, centers, widths, weights,
-                cfg.support, cfg.polish_ridge, idle)
+        ata, atz = (normal.matrix(), normal.atz) if normal is not None else extend_normal(
+            sub.xy, sub.z, polished, centers, widths, weights, cfg.support)
+        args = (sub.xy, sub.z, ata, atz, a0, centers, widths, weights, cfg.support,
+                cfg.polish_ridge, idle)
         memo: dict = {}  # the drops after the first take its solve
 
         def drop(share: float):
@@ -572,12 +581,12 @@ def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarra
             """
             nonlocal room
             got = solve_and_drop(*args, base=base, give_back=IDLE_GIVE_BACK * share,
-                                 extra=extra, memo=memo)
+                                 extra=extra, memo=memo, strips=True)
             if no_more and added and got is not None and len(got[0].widths) >= k_entry:
                 # the idle neurons did not pay for the tails: the cheapest go until they have
                 got = solve_and_drop(*args, base=base, give_back=NET_GIVE_BACK * share,
                                      extra=extra, at_least=len(widths) - k_entry + 1,
-                                     memo=memo)
+                                     memo=memo, strips=True)
             if got is None:
                 return "unsolved"
             pr, dropped = got

@@ -1,17 +1,16 @@
 """Batch polish of a sequentially learned network (beyond the paper).
 
-Sequential learning places neurons well but does not minimize the error of its
-own network: each observation corrects one neuron once. With the structure
-fixed, two batch stages finish the job:
+Sequential learning places neurons well but does not minimize the error of its own network: each
+observation corrects one neuron once. With the structure fixed, two batch stages finish the job:
 
 * ``weights``: a0 and every a_k by sparse linear least squares (centres and widths
   fixed; truncated Gaussians make the design matrix sparse);
 * ``full``: then damped Gauss-Newton (Levenberg-Marquardt) iterations over all
   parameters (a, log sigma, u) with a sparse Jacobian.
 
-Both add a Tikhonov term pulling the parameters toward the learned ones
-(``ridge``), which keeps neurons with little or no data under them -- at borders
-and over holes -- where learning left them instead of letting them explode.
+Both add a Tikhonov term pulling the parameters toward the learned ones (``ridge``),
+which keeps neurons with little or no data under them -- at borders and over holes --
+where learning left them instead of letting them explode.
 """
 
 from __future__ import annotations
@@ -45,8 +44,8 @@ class PolishResult:
 
     The weight polish also keeps its normal equations (``ata`` = A'A, a dense array up
     to :data:`DENSE_MAX` columns, else CSR, and ``atz`` = A'z over the columns
-    ``[a0, a_1 .. a_K]``, without the ridge), so that neurons can be
-    added later at the cost of the rows under them only (:func:`extend_and_solve`).
+    ``[a0, a_1 .. a_K]``, without the ridge), so that neurons can be added later at the
+    cost of the rows under them only (:func:`extend_and_solve`).
     """
 
     a0: float
@@ -129,13 +128,18 @@ class _Normal:
         A = sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, self.k1))
         r = z - A @ self.w0
         self.abs_sum += float(np.abs(r).sum())
-        At = A.T.tocsr()
-        ata, atr = (At @ A).tocoo(), At @ r
-        if self.first:  # keep the entries in a new column
-            keep = (ata.row >= self.first) | (ata.col >= self.first)
-            ata = sp.coo_matrix((ata.data[keep], (ata.row[keep], ata.col[keep])),
-                                shape=ata.shape)
-            atr[:self.first] = 0.0
+        f = self.first
+        if f:  # only the new columns' rows of A'A, mirrored: not the old block's product
+            At = A[:, f:].T.tocsr()
+            got = (At @ A).tocoo()  # rows f.., every column
+            old = got.col < f
+            ata = sp.coo_matrix((np.r_[got.data, got.data[old]],
+                                 (np.r_[got.row + f, got.col[old]],
+                                  np.r_[got.col, got.row[old] + f])), shape=(self.k1,) * 2)
+            atr = np.r_[np.zeros(f), At @ r]
+        else:
+            At = A.T.tocsr()
+            ata, atr = (At @ A).tocoo(), At @ r
         self.sparse = self.sparse + ata.tocsr()
         self.atr += atr
 
@@ -540,7 +544,7 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
                    weights: np.ndarray, support: float, ridge: float, limit: float, *,
                    base: np.ndarray | None = None, give_back: float = 1.0,
                    extra: float = 0.0, normal: bool = False,
-                   at_least: int = 0, memo: dict | None = None
+                   at_least: int = 0, memo: dict | None = None, strips: bool = False
                    ) -> tuple[PolishResult, int] | None:
     """Solve the weights from normal equations, then drop the neurons hardly needed.
 
@@ -567,24 +571,26 @@ def solve_and_drop(xy: np.ndarray, z: np.ndarray, ata: np.ndarray | sp.spmatrix,
     ``base`` that differ only in ``give_back``, ``extra`` and ``at_least``: the solve (the
     factorization and inverse, or the tiles' sweeps and inverses) is made by the first
     and taken by the others, whose results are the same numbers as without it.
+    ``strips``: sparse equations past :data:`IDLE_MAX_NEURONS` go by strips too (each
+    strip's rows made dense, never the whole matrix), instead of None.
     """
     import scipy.linalg as sla
 
     from ._network_kernels import eliminate
 
     k = len(widths)
-    if k > IDLE_MAX_NEURONS or ata.shape[0] != k + 1:
+    by_strips = strips and k > TILE_ABOVE and not isinstance(ata, np.ndarray)
+    if k > IDLE_MAX_NEURONS and not by_strips or ata.shape[0] != k + 1:
         return None
-    ata = _dense(ata)
+    ata = ata.tocsr() if by_strips else _dense(ata)
     w = np.concatenate([[a0], weights])
     memo = {} if memo is None else memo
     if k > TILE_ABOVE:
         return _solve_and_drop_tiled(xy, z, ata, atz, w, centers, widths, support, ridge,
                                      limit, base, give_back, extra, normal, at_least, memo)
     if "inv" not in memo:
-        # one BLAS thread: worker threads left spinning after a threaded factorization
-        # took the cores from the numba kernels that follow it (the piecewise fit of
-        # bun000 took 0.94-1.07 s with them, 0.63-0.69 s without; :mod:`._blas`)
+        # one BLAS thread (:mod:`._blas`): a threaded factorization's spinning workers took the
+        # numba kernels' cores (bun000's piecewise fit 0.94-1.07 s with them, 0.63-0.69 without)
         with one_blas_thread():
             chol, info = sla.lapack.dpotrf(_ridged(ata, ridge), lower=1)
             if info == 0:
@@ -645,9 +651,8 @@ class _Tiles:
     ``factors`` holds each tile's last Cholesky factor. Each tile's ridged block is
     factored once for the unknowns alive when made.
 
-    Not for the weight polish itself (tried for one-piece scans, 2-3 sweeps from the
-    learned weights in place of the dense solve, 2026-11-29): sweeps converge slowly
-    across strips from weights that far off, E-bar 1.0-1.6x the exact polish's on 100 x
+    Not for the weight polish (2-3 sweeps from the learned weights, 2026-11-29): from
+    weights that far off they converge slowly, E-bar 1.0-1.6x the exact polish's on 100 x
     100 grids of sin(k pi x) cos(k pi y) for 5-10 ms saved.
     """
 
@@ -672,10 +677,11 @@ class _Tiles:
         ata, atz, w, lam = self.ata, self.atz, self.w, self.lam
         for t, idx in enumerate(self.tiles):
             idx = idx[alive[idx]]
-            rows = ata[idx]
+            rows = ata[idx]  # (sparse equations: the strip's rows, sparse)
             made = self._blocks[t]
             if made is None or not np.array_equal(made[0], idx):
                 sub = rows[:, idx]  # (from the rows: a third of np.ix_'s time)
+                sub = sub if isinstance(sub, np.ndarray) else sub.toarray()
                 sub[np.diag_indices_from(sub)] += lam
                 with one_blas_thread():
                     chol, info = sla.lapack.dpotrf(sub, lower=1)

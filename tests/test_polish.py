@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -604,3 +605,38 @@ def test_a_memo_gives_later_drops_the_first_ones_solve(learned, monkeypatch, til
         assert alone[1] == shared[1] and np.array_equal(alone[0].weights, shared[0].weights)
         assert np.array_equal(alone[0].residual, shared[0].residual)
     assert ("tiles" in memo) == tiled and ("inv" in memo) != tiled
+
+
+def test_sparse_equations_are_extended_and_dropped_strip_by_strip(learned,
+                                                                  monkeypatch) -> None:
+    # past the dense normal equations (a scan of one piece with thousands of neurons: an
+    # elevation tile) the appended columns are summed sparse, only their own rows of A'A,
+    # and the drop goes strip by strip from the sparse matrix: the same equations and the
+    # same drop as dense ones, to rounding; without ``strips`` no drop is made there
+    import scipy.sparse as sparse
+
+    import asrbf_mesh._polish as P
+
+    hf, st, first, weights = _appended(learned, 8)
+    dense_ata, dense_atz = P.extend_normal(hf.xy, hf.z, first, st.centers, st.widths,
+                                           weights, 3.5)
+    sparse_first = replace(first, ata=sparse.csr_matrix(first.ata))
+    k = len(st.widths)
+    monkeypatch.setattr(P, "DENSE_MAX", k // 2)  # the extension takes the sparse sums
+    ata, atz = P.extend_normal(hf.xy, hf.z, sparse_first, st.centers, st.widths, weights, 3.5)
+    assert sparse.issparse(ata)
+    assert np.allclose(ata.toarray(), dense_ata, rtol=1e-12, atol=1e-12 * abs(dense_ata).max())
+    assert np.allclose(atz, dense_atz, rtol=1e-12, atol=1e-12 * abs(dense_atz).max())
+    monkeypatch.setattr(P, "TILE_ABOVE", k // 4)
+    monkeypatch.setattr(P, "TILE_NEURONS", k // 4)
+    base = np.r_[first.a0, first.weights, np.zeros(8)]
+    tail = (first.a0, st.centers, st.widths, weights, 3.5, 1e-4, np.inf)
+    by_dense, n_dense = P.solve_and_drop(hf.xy, hf.z, dense_ata, dense_atz, *tail,
+                                         base=base, give_back=0.5)
+    monkeypatch.setattr(P, "IDLE_MAX_NEURONS", k // 2)
+    assert P.solve_and_drop(hf.xy, hf.z, ata, atz, *tail, base=base) is None
+    by_sparse, n_sparse = P.solve_and_drop(hf.xy, hf.z, ata, atz, *tail, base=base,
+                                           give_back=0.5, strips=True)
+    assert 0 < n_sparse == n_dense < k
+    assert np.array_equal(by_sparse.widths, by_dense.widths)
+    assert np.allclose(by_sparse.weights, by_dense.weights, rtol=1e-9, atol=1e-12)
