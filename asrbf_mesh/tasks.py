@@ -25,9 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from ._atomic import atomic_dir, atomic_path, check_output_dir, check_output_path
-from ._config import PIECES, FitConfig
+from ._config import BLENDS, PIECES, FitConfig
 from ._frame import VIEW_AXES
-from ._holes import BLENDS
 from ._io import load_scan, save_mesh
 from ._lod import METHODS as LOD_METHODS
 from ._network import FORMAT_VERSION, Network
@@ -247,7 +246,6 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
     a network is given or ``blend`` / ``lowpass_rel`` are not their defaults (options
     of the mesh fill).
     """
-    from ._holes import fill_holes as fill
     from ._range_io import RangeOptions, is_range_path, load_range
 
     _check_fill_holes(network=network, max_hole_size=max_hole_size, blend=blend,
@@ -274,6 +272,8 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
         if lat is not None:
             return _fill_lattice_task(data, lat, out, max_hole_size, seed, pieces, progress,
                                       (scan,))
+    from ._holes import fill_holes as fill  # (the mesh fill: a grid's needs none of it)
+
     res = fill(data, net, max_hole_size=max_hole_size, blend=blend,
                lowpass_rel=None if lowpass_rel <= 0 else lowpass_rel, seed=seed,
                progress=progress, pieces=pieces)
