@@ -460,7 +460,7 @@ def _edt(mask):
 
 
 def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0,
-               cubic: float = 0.0) -> tuple[np.ndarray, ...] | None:
+               cubic: float = 0.0, quintic: bool = False) -> tuple[np.ndarray, ...] | None:
     """Thin-plate spline in 2D with a linear term (or its mean with a cubic one), or None.
 
     ``s(x) = sum_j w_j phi(|x - y_j|) + a_0 + a . (x - shift) / scale``, ``phi(r) = r^2
@@ -469,9 +469,12 @@ def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0,
     matrix's diagonal (scipy's ``smoothing``) a smoothing spline. With ``cubic`` > 0 the
     result is ``(1 - cubic)`` times that spline plus ``cubic`` times the same spline of
     the kernel ``r^3`` (scipy's ``"cubic"``): both fitted to the data, their values
-    averaged. Returns (centres, weights (n, 2): thin plate's and cubic's, a, shift, scale)
-    for :func:`ray_depths`, None when the centres are fewer than 3 or on one line, or a
-    system is singular (points repeated).
+    averaged. With ``quintic``, instead, the one spline of the kernel ``-r^5`` with a
+    quadratic term (scipy's ``"quintic"``, degree 2): it follows a curvature the data hold
+    (a quadratic exactly), where the thin plate flattens. Returns (centres, weights (n, 3):
+    thin plate's, cubic's and quintic's, a (6: 1, x, y, x^2, xy, y^2), shift, scale) for
+    :func:`ray_depths`, None when the centres are fewer than 3 (6 for ``quintic``) or on
+    one line (a conic), or a system is singular (points repeated).
     """
     y = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 2)
     d = np.ascontiguousarray(values, dtype=np.float64).ravel()
@@ -482,15 +485,19 @@ def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0,
     shift = 0.5 * (lo + hi)
     scale = 0.5 * (hi - lo)
     scale[scale == 0.0] = 1.0
-    P = np.column_stack([np.ones(n), (y - shift) / scale])
-    if np.linalg.matrix_rank(P) < 3:
+    x = (y - shift) / scale
+    P = np.column_stack([np.ones(n), x])
+    if quintic:
+        P = np.column_stack([P, x[:, 0] ** 2, x[:, 0] * x[:, 1], x[:, 1] ** 2])
+    m = P.shape[1]
+    if n < m or np.linalg.matrix_rank(P) < m:
         return None
-    w = np.zeros((n, 2))
-    a = np.zeros(3)
-    for kernel, share in ((0, 1.0 - cubic), (1, cubic)):
+    w = np.zeros((n, 3))
+    a = np.zeros(6)
+    for kernel, share in ((2, 1.0),) if quintic else ((0, 1.0 - cubic), (1, cubic)):
         if share <= 0.0:
             continue
-        A = np.zeros((n + 3, n + 3))
+        A = np.zeros((n + m, n + m))
         A[:n, :n] = _gram(y, kernel)
         if smoothing > 0.0:
             A[np.arange(n), np.arange(n)] += smoothing
@@ -498,11 +505,11 @@ def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0,
         A[n:, :n] = P.T
         # scipy's LAPACK, as its RBFInterpolator does (numpy's solve: two fills side by
         # side, a batch's or the benchmark's workers, ran 2x slower in its OpenBLAS threads)
-        _, _, sol, info = dgesv(A, np.r_[d, np.zeros(3)])
+        _, _, sol, info = dgesv(A, np.r_[d, np.zeros(m)])
         if info != 0 or not np.all(np.isfinite(sol)):
             return None
         w[:, kernel] = share * sol[:n]
-        a += share * sol[n:]
+        a[:m] += share * sol[n:]
     return y, w, a, shift, scale
 
 
@@ -536,38 +543,47 @@ def ray_depths(q: np.ndarray, c: np.ndarray, axes: np.ndarray, normal: np.ndarra
 
 @njit(cache=True)
 def _gram(y, kernel):
-    """Kernel matrix of the centres: ``r^2 log r`` (kernel 0) or ``r^3`` (kernel 1)."""
+    """Kernel matrix of the centres: ``r^2 log r`` (kernel 0), ``r^3`` (1) or ``-r^5`` (2)."""
     n = y.shape[0]
     K = np.zeros((n, n))
+    w0 = 1.0 if kernel == 0 else 0.0
+    w1 = 1.0 if kernel == 1 else 0.0
+    w2 = 1.0 if kernel == 2 else 0.0
     for i in range(n):
         for j in range(i + 1, n):
             dx = y[i, 0] - y[j, 0]
             dy = y[i, 1] - y[j, 1]
-            v = _phi(dx * dx + dy * dy, 1.0 - kernel, float(kernel))
+            v = _phi(dx * dx + dy * dy, w0, w1, w2)
             K[i, j] = v
             K[j, i] = v
     return K
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _phi(r2, w_plate, w_cubic):
-    """``w_plate r^2 log r + w_cubic r^3`` at squared distance ``r2``."""
+def _phi(r2, w_plate, w_cubic, w_quintic):
+    """``w_plate r^2 log r + w_cubic r^3 - w_quintic r^5`` at squared distance ``r2``."""
     out = 0.0
     if r2 > 0.0:
         if w_plate != 0.0:
             out += w_plate * 0.5 * r2 * np.log(r2)
         if w_cubic != 0.0:
             out += w_cubic * r2 * np.sqrt(r2)
+        if w_quintic != 0.0:
+            out -= w_quintic * r2 * r2 * np.sqrt(r2)
     return out
 
 
 @njit(cache=True, nogil=True)
 def _tps_value(u, v, y, w, a, shift, scale):
     s = a[0] + a[1] * (u - shift[0]) / scale[0] + a[2] * (v - shift[1]) / scale[1]
+    if a[3] != 0.0 or a[4] != 0.0 or a[5] != 0.0:  # the quintic's quadratic term
+        x0 = (u - shift[0]) / scale[0]
+        x1 = (v - shift[1]) / scale[1]
+        s += a[3] * x0 * x0 + a[4] * x0 * x1 + a[5] * x1 * x1
     for j in range(y.shape[0]):
         dx = u - y[j, 0]
         dy = v - y[j, 1]
-        s += _phi(dx * dx + dy * dy, w[j, 0], w[j, 1])
+        s += _phi(dx * dx + dy * dy, w[j, 0], w[j, 1], w[j, 2])
     return s
 
 

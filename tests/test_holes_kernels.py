@@ -113,6 +113,48 @@ def test_thin_plate_matches_scipy_and_rays_meet_it() -> None:
         assert np.abs(flat - (share * cub(q) + (1 - share) * ref(q))).max() < 1e-9
 
 
+def test_the_quintic_spline_matches_scipy_and_carries_a_quadratic_into_a_hole() -> None:
+    """``thin_plate(quintic=True)``: scipy's quintic with its quadratic term; on a ring
+    around a hole in a paraboloid it fills the hole with the paraboloid, where the thin
+    plate and cubic mix flattens it."""
+    rng = np.random.default_rng(7)
+    uv = rng.uniform(-1, 1, (1200, 2))
+    uv = uv[np.hypot(*uv.T) > 0.8]  # a ring: nothing within 0.8 of the centre
+    h = 0.4 * uv[:, 0] ** 2 + 0.1 * uv[:, 0] * uv[:, 1] - 0.2 * uv[:, 1] ** 2 + 0.3 * uv[:, 0]
+    q = rng.uniform(-0.5, 0.5, (200, 2))
+    truth = 0.4 * q[:, 0] ** 2 + 0.1 * q[:, 0] * q[:, 1] - 0.2 * q[:, 1] ** 2 + 0.3 * q[:, 0]
+    at = {}
+    for quintic in (False, True):
+        spline = hk.thin_plate(uv, h, 1e-4, 0.5, quintic=quintic)
+        at[quintic] = hk.ray_depths(q, np.zeros(3), np.eye(3)[:2], np.eye(3)[2], 1.0, spline,
+                                    1e-12, 1e-6)
+    ref = RBFInterpolator(uv, h, kernel="quintic", degree=2, smoothing=1e-4)
+    assert np.abs(at[True] - ref(q)).max() < 1e-8
+    assert np.abs(at[True] - truth).max() < 1e-9  # a quadratic is reproduced
+    assert np.abs(at[False] - truth).max() > 1e-4  # the thin plate and cubic sag
+    # too few points for a quadratic term, or all on a conic: no spline
+    assert hk.thin_plate(uv[:5], h[:5], quintic=True) is None
+    line = np.column_stack([uv[:, 0], 2 * uv[:, 0]])
+    assert hk.thin_plate(line, h, quintic=True) is None
+
+
+def test_a_ring_one_quadratic_fits_to_its_noise_is_curved() -> None:
+    """``_hole_patch._curved``: a cylinder's or dome's ring with noise is one quadratic
+    within a few noise levels; a rough ring (a scanned surface's bumps) is not; a ring of
+    few points or without noise never is."""
+    from asrbf_mesh._hole_patch import _CURVED_MIN, _curved, _ring_noise
+
+    rng = np.random.default_rng(3)
+    uv = rng.uniform(-1, 1, (900, 2))
+    uv = uv[np.hypot(*uv.T) > 0.5]
+    shaft = 0.5 * uv[:, 0] ** 2 + 0.002 * rng.standard_normal(len(uv))
+    rough = shaft + 0.02 * np.sin(9 * uv[:, 0]) * np.cos(7 * uv[:, 1])
+    assert _curved(uv, shaft, _ring_noise(uv, shaft))
+    assert not _curved(uv, rough, _ring_noise(uv, rough))
+    assert not _curved(uv[:_CURVED_MIN - 1], shaft[:_CURVED_MIN - 1], 1e-4)
+    assert not _curved(uv, 0.5 * uv[:, 0] ** 2, 0.0)
+
+
 def test_a_rings_noise_is_measured_and_a_smooth_ring_has_none() -> None:
     """The fill's thin plate smooths by the ring's noise (``_hole_patch._ring_noise``):
     the variance of heights about local quadratic fits, near the true one for Gaussian
