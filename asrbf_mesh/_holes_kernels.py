@@ -461,7 +461,7 @@ def _edt(mask):
 
 def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0,
                cubic: float = 0.0, quintic: bool = False) -> tuple[np.ndarray, ...] | None:
-    """Thin-plate spline in 2D with a linear term (or its mean with a cubic one), or None.
+    """Thin-plate spline in 2D, linear term (or its mean with a cubic one, or a quintic), or None.
 
     ``s(x) = sum_j w_j phi(|x - y_j|) + a_0 + a . (x - shift) / scale``, ``phi(r) = r^2
     log r``, the polynomial on the centres' box mapped to [-1, 1] (as scipy's
@@ -474,7 +474,7 @@ def thin_plate(centres: np.ndarray, values: np.ndarray, smoothing: float = 0.0,
     (a quadratic exactly), where the thin plate flattens. Returns (centres, weights (n, 3):
     thin plate's, cubic's and quintic's, a (6: 1, x, y, x^2, xy, y^2), shift, scale) for
     :func:`ray_depths`, None when the centres are fewer than 3 (6 for ``quintic``) or on
-    one line (a conic), or a system is singular (points repeated).
+    one line (for ``quintic``, on one conic), or a system is singular (points repeated).
     """
     y = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 2)
     d = np.ascontiguousarray(values, dtype=np.float64).ravel()
