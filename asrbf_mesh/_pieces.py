@@ -7,9 +7,10 @@ piece learns with the same absolute thresholds (E, E_omega, D_max, and D_min fro
 whole scan's spacing), so nothing is rescaled, and each piece's height field is the rows
 of the whole scan's. A piece with fewer than ``Segmentation.min_piece_points`` points (or
 fewer than learning needs) gets a small network instead of learning (:func:`small_piece`):
-three wide neurons at its three mutually farthest points, weights by least squares, which
-takes a tilted or bent fragment (a constant misses a steep one by its whole slope); one
-point, or points on a line, stay a constant.
+up to three wide neurons on its three mutually farthest points, weights by least squares,
+as few as fit its points within E (one neuron, a ramp across the fragment, fits most
+fragments of a grazing flank), which takes a tilted or bent fragment (a constant misses a
+steep one by its whole slope); one point, or points on a line, stay a constant.
 
 After the polish, each learned piece's tails are refined (:func:`refine_tails`): its
 points whose error across the surface still exceeds ``TAIL_FACTOR`` x E (and three times
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from itertools import combinations
 from typing import Any
 
 import numpy as np
@@ -43,6 +45,7 @@ from ._piece_map import PieceMap
 from ._polish import (
     DENSE_MAX,
     GrownNormal,
+    _ridged,
     appended_rows,
     drop_idle,
     extend_and_solve,
@@ -338,38 +341,84 @@ def parallel_pieces() -> bool:
 
 def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
                 constant: bool = False) -> Piece:
-    """Fit a fragment too small to learn: three wide neurons by least squares, or a constant.
+    """Fit a fragment too small to learn: up to three wide neurons, as few as fit, or a constant.
 
-    The neurons sit on the three mutually farthest points (the first point, the point
-    farthest from it, the point farthest from both), each as wide as the diagonal of the
-    fragment's bounding box; a0 and the weights minimize the squared error
-    (ridge-regularized toward zero). Kept only
-    when they lower the fragment's mean error: one point, or points on a line where
-    least squares cannot tell a slope, and fragments the constant already fits within E
-    stay the constant mean.
+    The candidate neurons sit on the three mutually farthest points (the first point,
+    the point farthest from it, the point farthest from both), each as wide as the
+    diagonal of the fragment's bounding box. One neuron, then two, then three are
+    tried (each choice of the candidates; a0 and the weights by least squares,
+    ridge-regularized toward the constant mean as the weight polish is), and the first
+    count whose best choice fits every point within E is taken (the growth criterion of
+    learning: a point within E asks for no neuron), else the best of three. A fit is
+    kept only when it lowers the fragment's mean error: one point, or points on a line
+    where least squares cannot tell a slope, and fragments the constant already fits
+    within E stay the constant mean. As few neurons as fit (:data:`SMALL_NEURONS`):
+    one neuron, a ramp across the fragment, fits most fragments of a grazing flank.
     """
     xy, z = sub.xy, sub.z
-    const = Piece(float(z.mean()), np.zeros((0, 2)), np.zeros(0), np.zeros(0), None,
+    mean = float(z.mean())
+    const = Piece(mean, np.zeros((0, 2)), np.zeros(0), np.zeros(0), None,
                   {**info, "constant": True})
-    if (constant or sub.n_points < 3 or np.abs(z - z.mean()).max() <= cfg.error_threshold
-            or (cfg.max_neurons is not None and cfg.max_neurons < 3)):
+    cap = SMALL_NEURONS if cfg.max_neurons is None else min(SMALL_NEURONS, cfg.max_neurons)
+    if (constant or sub.n_points < 3 or np.abs(z - mean).max() <= cfg.error_threshold
+            or cap < 1):
         return const
     picks = [0]
     dist = np.linalg.norm(xy - xy[0], axis=1)
     for _ in range(2):
         picks.append(int(np.argmax(dist)))
         dist = np.minimum(dist, np.linalg.norm(xy - xy[picks[-1]], axis=1))
-    centres = xy[picks]
     width = float(np.linalg.norm(np.ptp(xy, axis=0)))  # the fragment's extent, in O(n)
     if len(np.unique(picks)) < 3 or not width > 0:
         return const
-    pr = polish_weights(xy, z, float(z.mean()), centres, np.full(3, width), np.zeros(3),
-                        cfg.support, cfg.polish_ridge)
-    net = Piece(pr.a0, pr.centers, pr.widths, pr.weights, None, {**info, "constant": False})
-    err = np.abs(z - net.eval_unit(xy, cfg.support)[0]).mean()
-    if not (np.all(np.isfinite(pr.weights)) and err < np.abs(z - z.mean()).mean()):
+    centres = xy[picks]
+    d2 = ((xy[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2)
+    # the network's basis, truncated as its evaluation is (a fragment lies within one width)
+    cols = np.where(d2 <= (cfg.support * width) ** 2, np.exp(-d2 / width ** 2), 0.0)
+    best: tuple[float, tuple[int, ...], np.ndarray] | None = None
+    floor = float(np.abs(z - mean).mean())
+    for k in range(1, cap + 1):
+        fits = [_small_fit(cols[:, list(s)], z, mean, cfg.polish_ridge) + (s,)
+                for s in combinations(range(3), k)]
+        fits = [f for f in fits if np.isfinite(f[0])]
+        if not fits:
+            continue
+        err, worst, w, s = min(fits, key=lambda f: f[0])
+        if err < floor and (best is None or err < best[0]):
+            best = (err, s, w)
+            if worst <= cfg.error_threshold:
+                break
+    if best is None:
         return const
-    return net
+    _, s, w = best
+    sel = list(s)
+    return Piece(float(w[0]), centres[sel], np.full(len(sel), width), w[1:], None,
+                 {**info, "constant": False})
+
+
+#: :func:`small_piece`: the most neurons a fragment gets.
+SMALL_NEURONS = 3
+
+
+def _small_fit(cols: np.ndarray, z: np.ndarray, mean: float,
+               ridge: float) -> tuple[float, float, np.ndarray]:
+    """Least-squares ``(a0, a_k)`` over basis columns ``cols``: (mean |error|, max, w).
+
+    Minimizes ``||A w - z||^2 + lam ||w - (mean, 0, ..)||^2``, ``A = [1, cols]``, ``lam =
+    ridge * mean(diag(A'A))`` (:func:`~asrbf_mesh._polish._ridged`), as the weight polish
+    does (:func:`~asrbf_mesh._polish.polish_weights`); NaN errors for a singular system.
+    """
+    a = np.column_stack([np.ones(len(z)), cols])
+    w0 = np.zeros(a.shape[1])
+    w0[0] = mean
+    try:
+        w = w0 + np.linalg.solve(_ridged(a.T @ a, ridge), a.T @ (z - a @ w0))
+    except np.linalg.LinAlgError:
+        return np.nan, np.nan, w0
+    r = np.abs(z - a @ w)
+    if not np.all(np.isfinite(w)):
+        return np.nan, np.nan, w0
+    return float(r.mean()), float(r.max()), w
 
 
 def refine_tails(sub: HeightField, cfg: FitConfig, a0: float, centers: np.ndarray,
