@@ -373,7 +373,9 @@ def small_piece(sub: HeightField, cfg: FitConfig, info: dict[str, Any], *,
         return const
     centres = xy[picks]
     d2 = ((xy[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2)
-    # the network's basis, truncated as its evaluation is (a fragment lies within one width)
+    # the network's basis, truncated as its evaluation is (a fragment lies within one width):
+    # the columns of the weight polish's design matrix (:func:`~asrbf_mesh._polish.design_matrix`),
+    # made here in numpy: 12 us for a fragment of 20 points, through its grid 101 us
     cols = np.where(d2 <= (cfg.support * width) ** 2, np.exp(-d2 / width ** 2), 0.0)
     best: tuple[float, tuple[int, ...], np.ndarray] | None = None
     floor = float(np.abs(z - mean).mean())
@@ -421,9 +423,9 @@ def _small_fit(cols: np.ndarray, z: np.ndarray, mean: float,
         w = w0 + np.linalg.solve(_ridged(a.T @ a, ridge), a.T @ (z - a @ w0))
     except np.linalg.LinAlgError:
         return np.nan, np.nan, w0
-    r = np.abs(z - a @ w)
     if not np.all(np.isfinite(w)):
         return np.nan, np.nan, w0
+    r = np.abs(z - a @ w)
     return float(r.mean()), float(r.max()), w
 
 
