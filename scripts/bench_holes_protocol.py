@@ -75,7 +75,8 @@ def _case(args: tuple[str, int, bool, str, bool]) -> dict:
     secs = time.perf_counter() - t0
     out = {"name": name, "seed": seed, "traced": traced, "open": _open_holes(p, res),
            "n": np.bincount(p.hole, minlength=len(p.enclosed))[p.enclosed],
-           "rms": score_holes(p, res.mesh)[0][p.enclosed], "seconds": secs}
+           "rms": score_holes(p, res.mesh)[0][p.enclosed], "seconds": secs,
+           "crossing": _crossing(res.mesh, len(p.scan.faces))}
     methods = {}
     if poisson:
         from asrbf_mesh.evaluate import _meshlab
@@ -91,6 +92,16 @@ def _case(args: tuple[str, int, bool, str, bool]) -> dict:
         out[f"{method}_seconds"] = time.perf_counter() - t0
         out[f"{method}_rms"] = score_holes(p, mesh)[0][p.enclosed]
     return out
+
+
+def _crossing(mesh, n_scan_faces: int) -> int:
+    """Fill triangles that pymeshlab's self-intersection selection finds (the issue's check)."""
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces))
+    ms.compute_selection_by_self_intersections_per_face()
+    return int(np.count_nonzero(ms.current_mesh().face_selection_array()[n_scan_faces:]))
 
 
 def _open_holes(p, res) -> list[str | None]:
@@ -257,6 +268,12 @@ def main(argv: list[str] | None = None) -> int:
     lines = [f"- cases: {len(done) + len(bad):,} ({len(names)} scans × {len(args.seeds)} seeds); "
              f"crashes: {len(crashes)}; cases that raised: {len(bad) - len(crashes)}",
              f"- enclosed holes: {holes:,}; left open: {len(opened)}"]
+    crossing = [r.get("crossing", 0) for r in done]
+    if not args.fuzz:
+        lines.insert(1, f"- outputs with fill triangles that cross the scan or another fill "
+                        f"(pymeshlab's self-intersection selection): "
+                        f"{sum(c > 0 for c in crossing)} of {len(done)} ({sum(crossing):,} "
+                        "triangles)")
     for name, seed, why in (bad + opened)[:20]:
         lines.append(f"  - {label(name)} seed {seed}: {why}")
     suffix = "-views" if args.scans and not set(args.scans) & {"face", *BUNNIES} else ""

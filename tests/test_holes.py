@@ -459,7 +459,7 @@ def test_a_fragment_keeps_its_border_open_while_the_hole_beside_it_is_closed() -
     assert sorted(len(lp) for lp in loops) == [12, 4 * (n - 1)]  # the two outer borders
 
 
-@pytest.mark.parametrize("make", ["cylinder", "face_seed_6"])
+@pytest.mark.parametrize("make", ["cylinder", "face_seed_6", "face_seed_4"])
 def test_fills_do_not_intersect_the_scan_or_themselves(make: str) -> None:
     """pymeshlab's self-intersection selection finds no face of the fill."""
     import pymeshlab
@@ -469,7 +469,8 @@ def test_fills_do_not_intersect_the_scan_or_themselves(make: str) -> None:
     else:
         from asrbf_mesh.evaluate._punch_protocol import punch_protocol
 
-        holed = punch_protocol(am.load_scan(am.face_map_path()), 6).scan
+        # seed 4: a fill there crossed the scan where the face folds (14 triangles)
+        holed = punch_protocol(am.load_scan(am.face_map_path()), int(make[-1])).scan
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = fill_holes(holed, seed=0, progress=False)
@@ -480,6 +481,68 @@ def test_fills_do_not_intersect_the_scan_or_themselves(make: str) -> None:
     selected = np.flatnonzero(ms.current_mesh().face_selection_array())
     new_bad = selected[selected >= n_scan_faces]
     assert len(new_bad) == 0, f"{len(new_bad)} fill faces intersect"
+
+
+def test_crossing_faces_finds_new_faces_through_the_scan_and_only_those() -> None:
+    """A new triangle piercing an old one is found; one beside it, or sharing a corner, is not."""
+    from asrbf_mesh._hole_cross import crossing_faces, triangles_cross
+
+    v = np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0],  # an old triangle in z = 0
+                  [0.5, 0.5, -1], [0.5, 0.5, 1], [1.5, 1.5, 1],  # pierces it
+                  [5, 5, 0], [6, 5, 0], [5, 6, 0],  # far beside it
+                  [-1, 0, 0], [0, -1, 0]], dtype=float)  # shares its corner 0
+    f = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8], [0, 9, 10]])
+    assert crossing_faces(v, f, 1).tolist() == [1]
+    assert crossing_faces(v, f[[0, 2, 3]], 1).tolist() == []
+    assert crossing_faces(v, f, 4).tolist() == []  # no new face
+    # a soup of small triangles: the grid proposes every pair a brute force finds
+    rng = np.random.default_rng(3)
+    soup = rng.random((300, 1, 3)) * [10, 10, 1] + rng.normal(0, 0.4, (300, 3, 3))
+    crossed = np.zeros(300, dtype=bool)
+    for a in range(150, 300):
+        others = np.delete(np.arange(300), a)
+        hit = triangles_cross(np.repeat(soup[a][None], 299, 0), soup[others])
+        crossed[a] |= hit.any()
+        crossed[others[hit & (others >= 150)]] = True
+    got = crossing_faces(soup.reshape(-1, 3), np.arange(900).reshape(-1, 3), 150)
+    assert got.tolist() == (np.flatnonzero(crossed[150:]) + 150).tolist() and len(got) > 20
+
+
+def test_triangles_cross_agrees_with_edge_through_triangle_tests() -> None:
+    """Random pairs as an edge-through-triangle test says; contact is no crossing."""
+    from asrbf_mesh._hole_cross import triangles_cross
+
+    def edge_through(a, b, t):  # Moller-Trumbore, segment a-b against triangle t
+        e1, e2, d = t[1] - t[0], t[2] - t[0], b - a
+        h = np.cross(d, e2)
+        det = e1 @ h
+        if abs(det) < 1e-14:
+            return False
+        s = a - t[0]
+        u = (s @ h) / det
+        qv = np.cross(s, e1)
+        v = (d @ qv) / det
+        return 0 <= u <= 1 and v >= 0 and u + v <= 1 and 0 <= (e2 @ qv) / det <= 1
+
+    rng = np.random.default_rng(5)
+    p = rng.normal(size=(2000, 3, 3))
+    q = rng.normal(size=(2000, 3, 3)) + rng.normal(scale=0.7, size=(2000, 1, 3))
+    want = [any(edge_through(a[i], a[(i + 1) % 3], b) for i in range(3))
+            or any(edge_through(b[i], b[(i + 1) % 3], a) for i in range(3))
+            for a, b in zip(p, q, strict=True)]
+    assert 200 < sum(want) < 1800
+    assert triangles_cross(p, q).tolist() == want
+    t = np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0]], dtype=float)
+    others = np.array([[[0, 0, 0], [-1, 0, 0], [0, -1, 0]],  # a shared corner, one plane
+                       [[0, 0, 0], [2, 0, 0], [1, -1, 1]],  # a shared edge, bent
+                       [[0, 0, 0], [2, 0, 0], [1, 1, 0]],  # a shared edge, folded onto it
+                       [[0, 0, 0], [1, 1, -1], [1, 1, 1]]], dtype=float)  # a corner, through
+    assert triangles_cross(np.repeat(t[None], 4, 0), others).tolist() == [False, False,
+                                                                          True, True]
+    # two disjoint triangles of one plane 30 units out, which VCG's test selects
+    a = np.array([[35.0, 31.0, 33.5], [35.5, 29.5, 33.55], [36.0, 30.0, 33.6]])
+    b = np.array([[35.5, 28.5, 33.55], [36.5, 27.5, 33.65], [37.0, 30.0, 33.7]])
+    assert not triangles_cross(a[None], b[None])[0]
 
 
 def test_a_hole_punched_into_a_narrow_gap_is_filled_up_to_the_gap() -> None:
@@ -1070,13 +1133,17 @@ def test_a_hole_the_loop_stage_finishes_is_reported_filled(seed: int) -> None:
     assert all(h.reason is None for h in res.holes)
 
 
-def test_a_gap_the_border_walk_ran_through_is_closed_by_a_second_loop_pass() -> None:
+def test_a_gap_the_border_walk_ran_through_is_closed_by_a_second_loop_pass(monkeypatch) -> None:
     """A Kinect crop meshed as its range grid (float32 coordinates, as a PLY holds them):
     part of a 156-vertex hole's rim is walked as the outer border until the other loops
     are filled, and becomes a loop of its own only then. One more pass of the loop stage
-    closes it (23 rim edges were left open)."""
+    closes it (23 rim edges were left open). That fill then crosses the scan (1,353 of
+    its triangles: the crop's depth steps), so the fill leaves it out unless told not to
+    look (here, for the second pass's sake); either way no edge gets a third face."""
     from pathlib import Path
 
+    import asrbf_mesh._holes as holes_mod
+    from asrbf_mesh._hole_cross import crossing_faces
     from asrbf_mesh._range import read_depth_image
 
     g = read_depth_image(Path(__file__).parent / "data" / "tum_desk2_crop.png",
@@ -1087,8 +1154,15 @@ def test_a_gap_the_border_walk_ran_through_is_closed_by_a_second_loop_pass() -> 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = fill_holes(scan, seed=0, progress=False)
-    big = [h for h in res.holes if h.rim_vertices > 100]
+        with monkeypatch.context() as m:
+            m.setattr(holes_mod, "_leave_out_crossings", lambda v, f, outer, *_: (v, f, outer))
+            crossing = fill_holes(scan, seed=0, progress=False)
+    big = [h for h in crossing.holes if h.rim_vertices > 100]
     assert len(big) == 1 and big[0].filled and big[0].reason is None
-    _, counts = edges_count(res.mesh.faces)
-    assert counts.max() == 2
-    assert np.array_equal(res.mesh.vertices[:scan.n_points], scan.points)
+    (big,) = [h for h in res.holes if h.rim_vertices > 100]
+    assert big.filled or "would cross the scan" in big.reason
+    assert len(crossing_faces(res.mesh.vertices, res.mesh.faces, len(scan.faces))) == 0
+    for out in (res, crossing):
+        _, counts = edges_count(out.mesh.faces)
+        assert counts.max() == 2
+        assert np.array_equal(out.mesh.vertices[:scan.n_points], scan.points)
