@@ -39,10 +39,11 @@ def crossing_faces(local: np.ndarray, faces: np.ndarray, first_new: int) -> np.n
 
     ``local``: the vertices in the scan's view frame (depth last). Every pair of a new
     face and another face whose boxes overlap (a grid of cells in the view plane, each
-    face listed in the cells its box covers) is tested by :func:`triangles_cross`; a
-    fill triangle on the very corners of another (a crack's zero-width hole, a face whose
+    face listed in the cells its box covers) is tested by :func:`triangles_cross`. A fill
+    triangle on copies of another's corners (a crack's zero-width hole, a face whose
     corners are copies of its neighbours', closed where the copy lies) is no crossing:
-    the surface is the same.
+    the surface is the same; one on the same vertices is (a triangle alone closed by its
+    own reverse, a model view's one-triangle fragment: pymeshlab selected both).
     """
     pts = np.ascontiguousarray(local, dtype=np.float64).reshape(-1, 3)
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
@@ -71,8 +72,8 @@ def crossing_faces(local: np.ndarray, faces: np.ndarray, first_new: int) -> np.n
     keys, owner = _entries(ij, ny)
     order = np.argsort(keys, kind="stable")
     crossed = np.zeros(n, dtype=np.bool_)
-    in_threads(_crossing, n - first_new, threads_for(n - first_new), tri, lo, hi, first_new,
-               ij, ny, keys[order], owner[order], CONTACT, crossed)
+    in_threads(_crossing, n - first_new, threads_for(n - first_new), tri, faces, lo, hi,
+               first_new, ij, ny, keys[order], owner[order], CONTACT, crossed)
     return np.flatnonzero(crossed[first_new:]) + first_new
 
 
@@ -95,7 +96,7 @@ def _entries(ij, ny):
 
 
 @njit(cache=True, nogil=True)
-def _crossing(tri, lo, hi, first, ij, ny, keys, items, contact, crossed, i0, i1):
+def _crossing(tri, faces, lo, hi, first, ij, ny, keys, items, contact, crossed, i0, i1):
     # new faces first + i0 ... first + i1 - 1; each marks only itself (threads share none)
     for a in range(first + i0, first + i1):
         for i in range(ij[a, 0, 0], ij[a, 1, 0] + 1):
@@ -112,16 +113,18 @@ def _crossing(tri, lo, hi, first, ij, ny, keys, items, contact, crossed, i0, i1)
                             or lo[b, 1] > hi[a, 1] or lo[a, 2] > hi[b, 2]
                             or lo[b, 2] > hi[a, 2]):
                         continue
-                    if not _same_corners(tri[a], tri[b]) and _cross(tri[a], tri[b], contact):
-                        crossed[a] = True
+                    if _cross(tri[a], tri[b], contact) and not (
+                            _same_corners(tri[a], tri[b]) and not _same_corners(faces[a],
+                                                                                faces[b])):
+                        crossed[a] = True  # (copies of a crack's corners: the same surface)
 
 
 @njit(cache=True, nogil=True)
-def _same_corners(p, q):
+def _same_corners(p, q):  # rows of p all among q's: (3, 3) corners or (3,) vertex ids
     for i in range(3):
         hit = False
         for j in range(3):
-            if p[i, 0] == q[j, 0] and p[i, 1] == q[j, 1] and p[i, 2] == q[j, 2]:
+            if np.all(p[i] == q[j]):
                 hit = True
         if not hit:
             return False

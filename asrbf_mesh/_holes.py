@@ -315,9 +315,15 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
     new_f: list[np.ndarray] = [faces]
     n = len(vertices)
     # the loops to fill and their spacings; their first fills computed together (forked)
+    # a triangle whose three edges are all boundary is a fragment of its own, joined to
+    # the rest at its corners at most: its border is no hole (closed by its own reverse
+    # it was a triangle twice over, in an unwelded mesh next to every fill)
+    lone = faces[_in_sorted(_edge_keys(faces), boundary).reshape(3, -1).all(axis=0)]
+    lone = {tuple(t) for t in np.sort(lone, axis=1).tolist()}
     loops = [loop for loop in loops if len(loop) >= 3  # else a pinched vertex, not a hole
              and _in_sorted(_rim_keys(loop), boundary).all()  # a cycle of boundary edges
-             and (only is None or _in_sorted(_rim_keys(loop), only).any())]
+             and (only is None or _in_sorted(_rim_keys(loop), only).any())
+             and not (len(loop) == 3 and tuple(sorted(loop.tolist())) in lone)]
     sizes, steps = [], []
     for loop in loops:
         local = (vertices[loop] @ R)[:, :2]

@@ -180,8 +180,11 @@ def main(argv: list[str] | None = None) -> int:
             "the package's one-line errors. Copies of faces, faces that repeat a vertex, "
             "fins and faces turned against their neighbours are mended before the fill "
             "(`_hole_find.usable_faces`, with a warning); cracks (a vertex copied at the "
-            "same place) and an unwelded mesh are filled as holes of zero width where the "
-            "footprint sees them.\n\n"
+            "same place) are filled as holes of zero width where the footprint sees them. "
+            "In an unwelded mesh no two faces share a corner, so a patch shares no rim "
+            "edge: its holes are patched and reported open (\"rim edges could not be "
+            "closed\"); until 2026-11-30 each lone triangle beside a patch was closed by "
+            "its own reverse, which counted the rims closed.\n\n"
             + table(headers, rows))
     print(body)
     if not args.no_write:

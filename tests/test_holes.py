@@ -495,6 +495,11 @@ def test_crossing_faces_finds_new_faces_through_the_scan_and_only_those() -> Non
     assert crossing_faces(v, f, 1).tolist() == [1]
     assert crossing_faces(v, f[[0, 2, 3]], 1).tolist() == []
     assert crossing_faces(v, f, 4).tolist() == []  # no new face
+    # a new face on the same corners: by the same vertices, reversed, it crosses (a lone
+    # triangle closed by its reverse); by copies of them (a crack's corners) it does not
+    w = np.vstack([v, v[:3]])
+    assert crossing_faces(w, np.array([[0, 1, 2], [0, 2, 1]]), 1).tolist() == [1]
+    assert crossing_faces(w, np.array([[0, 1, 2], [11, 13, 12]]), 1).tolist() == []
     # a soup of small triangles: the grid proposes every pair a brute force finds
     rng = np.random.default_rng(3)
     soup = rng.random((300, 1, 3)) * [10, 10, 1] + rng.normal(0, 0.4, (300, 3, 3))
