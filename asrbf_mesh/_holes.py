@@ -454,7 +454,7 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     but of a loop closed in its own plane or by fairing (the faces from ``loops`` on) that
     crosses and is seen edge-on (:data:`WALL_FACING`) the whole fill: a wall between two
     layers (bun090's ear and the head behind it: +2,020 vertices on a 17-vertex loop,
-    288 of its triangles through the scan), where there is no surface to close. The
+    296 of its triangles through the scan), where there is no surface to close. The
     holes they filled are reported open, saying how many triangles were left out, and
     vertices no face uses any more are dropped (the scan's are kept, as every outer
     border's). Closing the gaps once more by the loop stage closed 2 of 177 (the views
@@ -463,13 +463,14 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     """
     from ._hole_cross import crossing_faces
 
-    bad = crossing_faces(vertices @ R, faces, first)  # R: the view frame's rotation
+    local = vertices @ R  # R: the view frame's rotation
+    bad = crossing_faces(local, faces, first)
     if len(bad) == 0:
         return vertices, faces, outer
     crossing = np.bincount(owner[bad], minlength=len(infos))  # a new face has an owner
     if bad[-1] >= loops:  # the whole fill of a loop that crosses, where it is a wall
         part = _edge_parts(faces[loops:])
-        t = (vertices @ R)[faces[loops:]]
+        t = local[faces[loops:]]
         normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         area = np.linalg.norm(normal, axis=1)
         facing = (np.bincount(part, weights=np.abs(normal[:, 2]))
