@@ -11,8 +11,10 @@ are int64 keys ``min * 2**31 + max`` kept sorted (:class:`_EdgeSet`).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
+from . import _jit_cache  # noqa: F401 (first: where numba caches the kernel below)
 from ._hole_loops import _oriented, fill_loop, simple_cycles
 
 _KEY = np.int64(2) ** 31  # edge key base: vertex indices stay below 2**31
@@ -136,22 +138,7 @@ def _chords_avoiding(loop: np.ndarray, vertices: np.ndarray,
     free = ~_EdgeSet.of(known).contains(a.astype(np.int64) * _KEY + b)
     for i in range(n):  # the rim's own edges are fine
         free[i, (i + 1) % n] = free[(i + 1) % n, i] = True
-    cost = np.full((n, n), np.inf)
-    pick = np.full((n, n), -1, dtype=np.int64)
-    for i in range(n - 1):
-        cost[i, i + 1] = 0.0
-    for span in range(2, n):
-        for i in range(n - span):
-            j = i + span
-            if not free[i, j]:
-                continue
-            for k in range(i + 1, j):
-                c = cost[i, k] + cost[k, j]
-                if not np.isfinite(c):
-                    continue
-                c += 0.5 * float(np.linalg.norm(np.cross(p[k] - p[i], p[j] - p[i])))
-                if c < cost[i, j]:
-                    cost[i, j], pick[i, j] = c, k
+    cost, pick = _min_area(np.ascontiguousarray(p, dtype=np.float64), free)
     if not np.isfinite(cost[0, n - 1]):
         return np.zeros((0, 3), np.int64)
     tris, stack = [], [(0, n - 1)]
@@ -163,6 +150,33 @@ def _chords_avoiding(loop: np.ndarray, vertices: np.ndarray,
         tris.append((loop[i], loop[k], loop[j]))
         stack += [(i, k), (k, j)]
     return _oriented(np.array(tris, dtype=np.int64), loop)
+
+
+@njit(cache=True, nogil=True)
+def _min_area(p, free):
+    # cost[i, j]: least area of the polygon i..j triangulated by free diagonals; pick: apex
+    n = p.shape[0]
+    cost = np.full((n, n), np.inf)
+    pick = np.full((n, n), -1, dtype=np.int64)
+    for i in range(n - 1):
+        cost[i, i + 1] = 0.0
+    for span in range(2, n):
+        for i in range(n - span):
+            j = i + span
+            if not free[i, j]:
+                continue
+            for k in range(i + 1, j):
+                c = cost[i, k] + cost[k, j]
+                if c == np.inf:
+                    continue
+                u0, u1, u2 = p[k, 0] - p[i, 0], p[k, 1] - p[i, 1], p[k, 2] - p[i, 2]
+                v0, v1, v2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+                w0, w1, w2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+                c += 0.5 * np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+                if c < cost[i, j]:
+                    cost[i, j] = c
+                    pick[i, j] = k
+    return cost, pick
 
 
 def _edge_keys(tris: np.ndarray) -> np.ndarray:
@@ -299,3 +313,57 @@ class _EdgeSet:
                                 count=len(flat))
             hit |= extra.reshape(keys.shape)
         return hit
+
+
+def close_gaps(local: np.ndarray, faces: np.ndarray, still_open: np.ndarray,
+               left_keys: np.ndarray, wall_facing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Close by chords the small gaps that left-out crossing triangles opened.
+
+    ``local``: the vertices in the view frame; ``faces``: the mesh without the triangles
+    left out; ``still_open``: sorted keys of its boundary edges on no outer border;
+    ``left_keys``: sorted keys of the left-out triangles' edges. Each boundary cycle of
+    open edges, one of them a left-out triangle's, of at most :data:`_DP_MAX` vertices, is
+    triangulated by chords (:func:`_chords_avoiding`, no new vertex, no edge the mesh
+    has); a triangulation seen edge-on (area-weighted ``|n_z|`` below ``wall_facing``: a
+    wall between two layers) or crossing the mesh or another gap's
+    (:func:`~asrbf_mesh._hole_cross.crossing_faces`) is not used. Returns the triangles
+    and, for each, the key of one left-out edge on its cycle (whose fill it mends).
+    """
+    from ._hole_cross import crossing_faces
+    from ._hole_loops import boundary_cycles
+
+    none = np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    if len(still_open) == 0:
+        return none
+    cycles = [c for cycle in boundary_cycles(faces) for c in simple_cycles(cycle)
+              if 3 <= len(c) <= _DP_MAX]
+    known: _EdgeSet | None = None
+    tris: list[np.ndarray] = []
+    mends: list[int] = []
+    for c in cycles:
+        rim = _rim_keys(c)
+        if not _in_sorted(rim, still_open).all():
+            continue
+        hit = rim[_in_sorted(rim, left_keys)]
+        if len(hit) == 0:
+            continue
+        if known is None:
+            known = _EdgeSet(np.unique(_edge_keys(faces)))
+        t = _chords_avoiding(c, local, known)
+        if len(t) == 0:
+            continue
+        tri = local[t]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = float(np.linalg.norm(normal, axis=1).sum())
+        if area <= 0.0 or float(np.abs(normal[:, 2]).sum()) < wall_facing * area:
+            continue
+        known.add(_edge_keys(t))
+        tris.append(t)
+        mends.append(int(hit[0]))
+    if not tris:
+        return none
+    new = np.vstack(tris)
+    cycle_of = np.repeat(np.arange(len(tris)), [len(t) for t in tris])
+    bad = crossing_faces(local, np.vstack([faces, new]), len(faces)) - len(faces)
+    ok = ~np.isin(cycle_of, np.unique(cycle_of[bad]))
+    return new[ok], np.asarray(mends, dtype=np.int64)[cycle_of[ok]]

@@ -1171,3 +1171,91 @@ def test_a_gap_the_border_walk_ran_through_is_closed_by_a_second_loop_pass(monke
         _, counts = edges_count(out.mesh.faces)
         assert counts.max() == 2
         assert np.array_equal(out.mesh.vertices[:scan.n_points], scan.points)
+
+
+def _kinect_crop_mesh() -> am.Scan:
+    """The Kinect desk2 crop meshed as its range grid, as a float32 PLY holds it."""
+    from pathlib import Path
+
+    from asrbf_mesh._range import read_depth_image
+
+    g = read_depth_image(Path(__file__).parent / "data" / "tum_desk2_crop.png",
+                         depth_scale=5000, intrinsics=(520.9, 521.0, 305.1, 139.7))
+    s = g.to_scan()
+    return am.Scan((s.points * [1.0, -1.0, -1.0]).astype(np.float32).astype(np.float64),
+                   s.faces[:, ::-1])
+
+
+def test_a_loop_fill_that_crosses_leaves_the_hole_beside_it_filled() -> None:
+    """A flat grid with two cells out: hole 0 closed by its patch, the other cell by a
+    loop fill the loop stage credited to hole 0 (a shared rim vertex). A fin of the scan
+    stands in that cell, so its fill crosses and goes (chords would cross it too); a wall
+    of the loop stage through hole 0's patch goes whole, and the patch, which crosses only
+    that wall, stays. Hole 0 is filled; the cell is reported as a gap of its own."""
+    from asrbf_mesh._hole_close import _rim_keys_of
+    from asrbf_mesh._hole_loops import outer_loops
+    from asrbf_mesh._holes import HoleInfo, _leave_out_crossings
+
+    x, y = np.meshgrid(np.arange(6.0), np.arange(6.0))
+    grid = np.column_stack([x.ravel(), y.ravel(), np.zeros(36)])
+    fin = [[3.1, 3.5, -1.0], [3.9, 3.5, -1.0], [3.5, 3.5, 1.0]]  # in cell 18 (row 3, col 3)
+    wall = [[1.1, 1.5, -1.0], [1.9, 1.5, -1.0], [1.5, 1.5, 1.0]]  # in cell 6 (row 1, col 1)
+    v = np.vstack([grid, fin, wall])
+    f = grid_faces(6, 6)
+    scan = np.vstack([np.delete(f, [12, 13, 36, 37], axis=0), [[36, 37, 38]]])
+    faces = np.vstack([scan, f[[12, 13]], f[[36, 37]], [[39, 40, 41]]])
+    first, loops = len(scan), len(scan) + 2
+    owner = np.r_[np.full(first, -1), np.zeros(5, np.int64)]
+    infos = [HoleInfo(0, 1.4, 10.0, (1.5, 1.5, 0.0), 4, True, None, 3, 5)]
+    rim = _rim_keys_of(np.array([[7, 8], [8, 14], [14, 13], [13, 7]]))
+    outer = outer_loops(faces[:-1], len(v))  # the grid's border and the fin's
+    out_v, out_f, _ = _leave_out_crossings(v, faces, outer, owner, infos, first, loops,
+                                           39, np.eye(3), [rim], 14.0)
+    assert len(out_v) == 39  # the wall's vertices dropped
+    assert len(out_f) == first + 2
+    assert np.array_equal(out_f[first:], f[[12, 13]])  # the patch stays
+    assert infos[0].filled and infos[0].reason is None and infos[0].faces_added == 2
+    assert len(infos) == 2 and not infos[1].filled
+    assert infos[1].reason.startswith("a gap beside hole 0: ")
+
+
+def test_close_gaps_mends_a_flat_gap_by_chords_and_leaves_a_wall() -> None:
+    """Two triangles left out of a flat grid: closed by chords. The same gap stood on its
+    edge (a wall between two layers, seen edge-on) stays open."""
+    from asrbf_mesh._hole_close import _edge_keys, close_gaps
+
+    def closed(v: np.ndarray) -> int:
+        f = grid_faces(5, 5)
+        gone = f[[12, 13]]
+        kept = np.delete(f, [12, 13], axis=0)
+        keys, count = np.unique(_edge_keys(kept), return_counts=True)
+        gap = np.intersect1d(keys[count == 1], _edge_keys(gone))  # the open edges but the border
+        tris, mends = close_gaps(v, kept, gap, np.unique(_edge_keys(gone)), 0.15)
+        assert len(tris) == len(mends)
+        return len(tris)
+
+    x, y = np.meshgrid(np.arange(5.0), np.arange(5.0))
+    flat = np.column_stack([x.ravel(), y.ravel(), np.zeros(25)])
+    assert closed(flat) == 2
+    wall = flat[:, [0, 2, 1]]  # the grid in the xz plane: seen edge-on from +z
+    assert closed(wall) == 0
+
+
+def test_min_area_triangulation_takes_the_smaller_diagonal() -> None:
+    """The compiled dynamic programme: a planar convex polygon costs its area whatever
+    the triangulation; a bent quad takes the diagonal of the smaller two triangles."""
+    from asrbf_mesh._hole_close import _min_area
+
+    t = np.linspace(0, 2 * np.pi, 9)[:-1]
+    octagon = np.column_stack([np.cos(t), np.sin(t), np.zeros(8)])
+    cost, _ = _min_area(octagon, np.ones((8, 8), dtype=bool))
+    assert cost[0, 7] == pytest.approx(2 * np.sqrt(2))  # the regular octagon's area
+    quad = np.array([[0.0, 0, 0], [1, 0, 1], [1, 1, 0], [0, 1, 1]])
+    cost, pick = _min_area(quad, np.ones((4, 4), dtype=bool))
+    ac = 2 * 0.5 * np.linalg.norm(np.cross(quad[1] - quad[0], quad[2] - quad[0]))
+    bd = 2 * 0.5 * np.linalg.norm(np.cross(quad[2] - quad[1], quad[3] - quad[1]))
+    assert cost[0, 3] == pytest.approx(min(ac, bd))
+    free = np.ones((4, 4), dtype=bool)
+    free[0, 2] = free[2, 0] = False  # a diagonal the mesh has: the other one
+    cost, pick = _min_area(quad, free)
+    assert pick[0, 3] in (1, 2) and np.isfinite(cost[0, 3])
