@@ -316,20 +316,22 @@ class _EdgeSet:
 
 
 def close_gaps(local: np.ndarray, faces: np.ndarray, still_open: np.ndarray,
-               left_keys: np.ndarray, wall_facing: float) -> tuple[np.ndarray, np.ndarray]:
+               left_keys: np.ndarray, wall_facing: float, keys: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
     """Close by chords the small gaps that left-out crossing triangles opened.
 
     ``local``: the vertices in the view frame; ``faces``: the mesh without the triangles
     left out; ``still_open``: sorted keys of its boundary edges on no outer border;
-    ``left_keys``: sorted keys of the left-out triangles' edges. Each boundary cycle of
-    open edges, one of them a left-out triangle's, of at most :data:`_DP_MAX` vertices, is
-    triangulated by chords (:func:`_chords_avoiding`, no new vertex, no edge the mesh
-    has); a triangulation seen edge-on (area-weighted ``|n_z|`` below ``wall_facing``: a
-    wall between two layers) or crossing the mesh or another gap's
-    (:func:`~asrbf_mesh._hole_cross.crossing_faces`) is not used. Returns the triangles
+    ``left_keys``: sorted keys of the left-out triangles' edges; ``keys``: all of
+    ``faces``' edge keys, sorted, when known. Each boundary cycle of open edges, one of
+    them a left-out triangle's, of at most :data:`_DP_MAX` vertices, is triangulated by
+    chords (:func:`_chords_avoiding`, no new vertex, no edge the mesh has); a
+    triangulation seen edge-on (area-weighted ``|n_z|`` below ``wall_facing``: a wall
+    between two layers) or crossing the mesh or another gap's
+    (:func:`~asrbf_mesh._hole_cross.crossing_of`) is not used. Returns the triangles
     and, for each, the key of one left-out edge on its cycle (whose fill it mends).
     """
-    from ._hole_cross import crossing_faces
+    from ._hole_cross import crossing_of
     from ._hole_loops import boundary_cycles
 
     none = np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
@@ -348,7 +350,7 @@ def close_gaps(local: np.ndarray, faces: np.ndarray, still_open: np.ndarray,
         if len(hit) == 0:
             continue
         if known is None:
-            known = _EdgeSet(np.unique(_edge_keys(faces)))
+            known = _EdgeSet(np.unique(_edge_keys(faces)) if keys is None else keys)
         t = _chords_avoiding(c, local, known)
         if len(t) == 0:
             continue
@@ -364,6 +366,6 @@ def close_gaps(local: np.ndarray, faces: np.ndarray, still_open: np.ndarray,
         return none
     new = np.vstack(tris)
     cycle_of = np.repeat(np.arange(len(tris)), [len(t) for t in tris])
-    bad = crossing_faces(local, np.vstack([faces, new]), len(faces)) - len(faces)
+    bad = crossing_of(local, np.vstack([faces, new]), len(faces) + np.arange(len(new)))
     ok = ~np.isin(cycle_of, np.unique(cycle_of[bad]))
     return new[ok], np.asarray(mends, dtype=np.int64)[cycle_of[ok]]

@@ -24,7 +24,7 @@ from numba import njit
 from . import _jit_cache  # noqa: F401 (first: where numba caches the kernels below)
 from ._network_kernels import in_threads, threads_for
 
-__all__ = ["crossing_faces", "triangles_cross"]
+__all__ = ["crossing_faces", "crossing_of", "triangles_cross"]
 
 #: :func:`triangles_cross`: reaching into the other triangle by up to this share of the
 #: pair's longest edge is contact (a shared corner or edge), not a crossing.
@@ -75,6 +75,53 @@ def crossing_faces(local: np.ndarray, faces: np.ndarray, first_new: int) -> np.n
     in_threads(_crossing, n - first_new, threads_for(n - first_new), tri, faces, lo, hi,
                first_new, ij, ny, keys[order], owner[order], CONTACT, crossed)
     return np.flatnonzero(crossed[first_new:]) + first_new
+
+
+def crossing_of(local: np.ndarray, faces: np.ndarray, test: np.ndarray) -> np.ndarray:
+    """Whether each face of ``test`` (indices into ``faces``) crosses another face.
+
+    :func:`crossing_faces` over the faces that can: those whose boxes in the view plane
+    touch a cell of a grid (twice the test faces' median box) that a test face's box
+    covers; a face whose box spans at most two cells each way touches only its corners'
+    cells, a wider one is always taken. The same answer as testing against every face,
+    for the grid's cost over the few: a fill's second look at its patches on a Kinect
+    frame (490 faces among 568,000) 0.7 s -> 0.2 s.
+    """
+    test = np.asarray(test, dtype=np.int64)
+    out = np.zeros(len(test), dtype=bool)
+    if len(test) == 0:
+        return out
+    xy = np.asarray(local, dtype=np.float64)[:, :2]
+    rest = np.ones(len(faces), dtype=bool)
+    rest[test] = False
+    others = np.flatnonzero(rest)
+    near = others
+    t = xy[faces[test]]
+    lo, hi = t.min(axis=1), t.max(axis=1)
+    cell = 2.0 * float(np.median((hi - lo).max(axis=1)))
+    if cell > 0.0 and np.isfinite(cell):
+        origin = lo.min(axis=0)
+        a = np.floor((lo - origin) / cell).astype(np.int64)
+        span = np.floor((hi - origin) / cell).astype(np.int64) - a + 1
+        cells = span[:, 0] * span[:, 1]
+        if int(cells.sum()) <= _CELLS_PER_FACE * len(test) + 100_000:
+            row = np.repeat(np.arange(len(test)), cells)
+            k = np.arange(len(row)) - np.repeat(np.cumsum(cells) - cells, cells)
+            marked = np.unique((a[row, 0] + k // span[row, 1]) * (1 << 32)
+                               + a[row, 1] + k % span[row, 1])
+            f = xy[faces[others]]
+            flo = np.floor((f.min(axis=1) - origin) / cell).astype(np.int64)
+            fhi = np.floor((f.max(axis=1) - origin) / cell).astype(np.int64)
+            hit = ((fhi - flo) > 1).any(axis=1)
+            for i in (flo[:, 0], fhi[:, 0]):
+                for j in (flo[:, 1], fhi[:, 1]):
+                    key = i * (1 << 32) + j
+                    at = np.minimum(np.searchsorted(marked, key), len(marked) - 1)
+                    hit |= marked[at] == key
+            near = others[hit]
+    sub = np.vstack([np.asarray(faces)[near], np.asarray(faces)[test]])
+    out[crossing_faces(local, sub, len(near)) - len(near)] = True
+    return out
 
 
 @njit(cache=True, nogil=True)

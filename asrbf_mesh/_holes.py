@@ -469,7 +469,7 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     the rim's plane) closed 2 of 177 (the views of the cow, bone and airplane, seeds
     0-9): the fold that made the fill cross is still there.
     """
-    from ._hole_cross import crossing_faces
+    from ._hole_cross import crossing_faces, crossing_of
 
     local = vertices @ R  # R: the view frame's rotation
     bad = crossing_faces(local, faces, first)
@@ -488,23 +488,26 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
         dropped = np.union1d(bad[bad >= loops], loops + np.flatnonzero(np.isin(part, walls)))
         if bad[0] < loops:  # a patch yields only to the scan and other patches: test again
             kept = np.delete(np.arange(len(faces)), dropped)
-            crossed = np.union1d(bad[bad >= loops],
-                                 kept[crossing_faces(local, faces[kept], first)])
+            patches = bad[bad < loops]
+            again = crossing_of(local, faces[kept], np.searchsorted(kept, patches))
+            crossed = np.union1d(bad[bad >= loops], patches[again])
             bad = np.union1d(dropped, crossed)
         else:
             bad = dropped
     crossing = np.bincount(owner[crossed], minlength=len(infos))  # a new face has an owner
     kept = np.delete(faces, bad, axis=0)
-    open_now = _still_open(kept, outer)
+    keys, count = np.unique(_edge_keys(kept), return_counts=True)
+    open_now = _still_open(kept, outer, (keys, count))
     left_keys = _edge_keys(faces[bad])  # the left-out triangles' edges, and whose
     order = np.argsort(left_keys, kind="stable")
     left_keys, left_owner = left_keys[order], np.tile(owner[bad], 3)[order]
-    mend, key = close_gaps(local, kept, open_now, left_keys, WALL_FACING)
+    mend, key = close_gaps(local, kept, open_now, left_keys, WALL_FACING, keys)
     mended = np.zeros(len(infos), np.int64)
     if len(mend):
         np.add.at(mended, left_owner[np.searchsorted(left_keys, key)], 1)
         kept = np.vstack([kept, mend])
-        open_now = _still_open(kept, outer)
+        # a mend's edges: the open ones it closes, and chords two of its triangles share
+        open_now = np.setdiff1d(open_now, _edge_keys(mend))
     left = np.bincount(owner[bad], minlength=len(infos))
     used = np.zeros(len(vertices), dtype=bool)
     used[:n_base] = True
@@ -545,9 +548,13 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     return vertices[used], slot[kept], [slot[loop] for loop in outer]
 
 
-def _still_open(faces: np.ndarray, outer: list[np.ndarray]) -> np.ndarray:
-    """Sorted keys of the boundary edges of ``faces`` that lie on no part's outer border."""
-    keys, count = np.unique(_edge_keys(faces), return_counts=True)
+def _still_open(faces: np.ndarray, outer: list[np.ndarray],
+                counted: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Sorted keys of the boundary edges of ``faces`` that lie on no part's outer border.
+
+    ``counted``: the faces' edge keys and how many faces each has, when known.
+    """
+    keys, count = counted or np.unique(_edge_keys(faces), return_counts=True)
     still_open = keys[count == 1]
     if outer:
         still_open = np.setdiff1d(still_open, np.concatenate([_rim_keys(o) for o in outer]))

@@ -513,6 +513,23 @@ def test_crossing_faces_finds_new_faces_through_the_scan_and_only_those() -> Non
     assert got.tolist() == (np.flatnonzero(crossed[150:]) + 150).tolist() and len(got) > 20
 
 
+def test_crossing_of_a_few_faces_agrees_with_brute_force() -> None:
+    """crossing_of tests a few faces against the faces near them only: the same answer as
+    every pair, long triangles (boxes over many cells) and tests among each other too."""
+    from asrbf_mesh._hole_cross import crossing_of, triangles_cross
+
+    rng = np.random.default_rng(5)
+    soup = rng.random((400, 1, 3)) * [10, 10, 1] + rng.normal(0, 0.3, (400, 3, 3))
+    soup[:6] = rng.random((6, 3, 3)) * [10, 10, 1]  # long ones, across the soup
+    faces = np.arange(1200).reshape(-1, 3)
+    for test in (rng.choice(400, 40, replace=False), np.arange(10), np.array([7])):
+        want = [bool(triangles_cross(np.repeat(soup[t][None], 399, 0),
+                                     np.delete(soup, t, axis=0)).any()) for t in test]
+        got = crossing_of(soup.reshape(-1, 3), faces, test)
+        assert got.tolist() == want
+    assert crossing_of(soup.reshape(-1, 3), faces, np.arange(40)).sum() > 5  # it does cross
+
+
 def test_triangles_cross_agrees_with_edge_through_triangle_tests() -> None:
     """Random pairs as an edge-through-triangle test says; contact is no crossing."""
     from asrbf_mesh._hole_cross import triangles_cross
@@ -1232,6 +1249,8 @@ def test_close_gaps_mends_a_flat_gap_by_chords_and_leaves_a_wall() -> None:
         gap = np.intersect1d(keys[count == 1], _edge_keys(gone))  # the open edges but the border
         tris, mends = close_gaps(v, kept, gap, np.unique(_edge_keys(gone)), 0.15)
         assert len(tris) == len(mends)
+        normal = np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]])
+        assert np.all(normal @ np.cross(v[1] - v[0], v[5] - v[0]) > 0)  # the grid's way
         return len(tris)
 
     x, y = np.meshgrid(np.arange(5.0), np.arange(5.0))
