@@ -85,7 +85,7 @@ def crossing_of(local: np.ndarray, faces: np.ndarray, test: np.ndarray) -> np.nd
     covers; a face whose box spans at most two cells each way touches only its corners'
     cells, a wider one is always taken. The same answer as testing against every face,
     for the grid's cost over the few: a fill's second look at its patches on a Kinect
-    frame (490 faces among 568,000) 0.7 s -> 0.2 s.
+    frame (490 faces among 568,000) 0.7 s -> 0.3 s.
     """
     test = np.asarray(test, dtype=np.int64)
     out = np.zeros(len(test), dtype=bool)
