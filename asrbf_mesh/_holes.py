@@ -373,11 +373,13 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
         known.add(_edge_keys(t))
         n += len(v)
         if owner:
-            for i in owner:
+            for i in owner:  # the fill is counted once, with the hole that owns its faces
                 h = infos[i]
+                mine = i == owner[0]
                 infos[i] = dataclasses.replace(
-                    h, filled=True, reason=None, vertices_added=h.vertices_added + len(v),
-                    faces_added=h.faces_added + len(t))
+                    h, filled=True, reason=None,
+                    vertices_added=h.vertices_added + len(v) * mine,
+                    faces_added=h.faces_added + len(t) * mine)
         else:
             infos.append(HoleInfo(len(infos), size, 100.0 * size / diag,
                                   tuple(float(x) for x in vertices[loop].mean(axis=0)),
@@ -535,8 +537,12 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
             continue
         infos[i] = h  # closed: its own gaps mended by chords, or none
         if gap:  # open is a loop beside it the loop stage had credited to it (a shared
-            # rim vertex): a gap of its own, reported so
-            ends = np.unique(faces[mine[mine >= loops]])
+            # rim vertex): a gap of its own, reported so, with its own fill's counts
+            theirs = mine[mine >= loops]
+            why = (f"{np.count_nonzero(np.isin(theirs, crossed)):,} of its fill's triangles "
+                   f"would cross the scan or another fill (the surface folds over itself "
+                   f"there): {len(theirs):,} left out")
+            ends = np.unique(faces[theirs])
             size = float(np.linalg.norm(np.ptp(local[ends, :2], axis=0)))
             infos.append(HoleInfo(len(infos), size, 100.0 * size / diag,
                                   tuple(float(x) for x in vertices[ends].mean(axis=0)),

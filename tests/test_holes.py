@@ -1184,6 +1184,9 @@ def test_a_gap_the_border_walk_ran_through_is_closed_by_a_second_loop_pass(monke
     (big,) = [h for h in res.holes if h.rim_vertices > 100]
     assert big.filled or "would cross the scan" in big.reason
     assert len(crossing_faces(res.mesh.vertices, res.mesh.faces, len(scan.faces))) == 0
+    # the report adds up to the mesh: a loop's fill counted once, with the hole owning it
+    assert len(res.mesh.faces) == len(scan.faces) + res.faces_added
+    assert len(res.mesh.vertices) == scan.n_points + res.vertices_added
     for out in (res, crossing):
         _, counts = edges_count(out.mesh.faces)
         assert counts.max() == 2
