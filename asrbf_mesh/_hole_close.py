@@ -189,6 +189,19 @@ def _edge_keys(tris: np.ndarray) -> np.ndarray:
 _GAP_MAX = 8
 
 
+def _edge_parts(tris: np.ndarray) -> np.ndarray:
+    """Label of each triangle's part, triangles joined by shared edges."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    _, edge = np.unique(_edge_keys(tris), return_inverse=True)
+    t = len(tris)
+    tri = np.tile(np.arange(t), 3)  # _edge_keys lists the edges ab, then bc, then ca
+    graph = coo_matrix((np.ones(len(tri)), (tri, t + edge.ravel())),
+                       shape=(t + int(edge.max()) + 1,) * 2)
+    return connected_components(graph, directed=False)[1][:t]
+
+
 class _Parts:
     """The parts of a mesh joined across edges, and how much border each has.
 

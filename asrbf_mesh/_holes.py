@@ -40,6 +40,7 @@ network over them.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import time
 import warnings
@@ -56,6 +57,7 @@ from ._frame import sampling_spacing
 from ._hole_close import (
     _KEY,
     _edge_keys,
+    _edge_parts,
     _EdgeSet,
     _fill_cycles,
     _fill_fallback,
@@ -70,6 +72,7 @@ from ._hole_close import (
 from ._hole_find import Hole, boundary_edges, find_holes, usable_faces
 from ._hole_layers import fill_layers
 from ._hole_patch import BLENDS, Ctx, Patch, fill_single
+from ._hole_refill import refill_crossed
 from ._mesh import Mesh, Scan
 from ._network import Network
 from ._validate import check_choice, check_float, check_points, check_seed, parse_length
@@ -432,23 +435,11 @@ def _agree_with_scan(tris: np.ndarray, rim_keys: np.ndarray, inner_keys: np.ndar
 WALL_FACING = 0.15
 
 
-def _edge_parts(tris: np.ndarray) -> np.ndarray:
-    """Label of each triangle's part, triangles joined by shared edges."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    _, edge = np.unique(_edge_keys(tris), return_inverse=True)
-    t = len(tris)
-    tri = np.tile(np.arange(t), 3)  # _edge_keys lists the edges ab, then bc, then ca
-    graph = coo_matrix((np.ones(len(tri)), (tri, t + edge.ravel())),
-                       shape=(t + int(edge.max()) + 1,) * 2)
-    return connected_components(graph, directed=False)[1][:t]
-
-
 def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np.ndarray],
                          owner: np.ndarray, infos: list[HoleInfo], first: int, loops: int,
                          n_base: int, R: np.ndarray, rim_keys: list[np.ndarray], diag: float
-                         ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+                         ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray,
+                                    list[int]]:
     """Leave out the fill triangles that cross the scan or another fill (updates ``infos``).
 
     :func:`~asrbf_mesh._hole_cross.crossing_faces` finds them among the faces from
@@ -476,7 +467,7 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     local = vertices @ R  # R: the view frame's rotation
     bad = crossing_faces(local, faces, first)
     if len(bad) == 0:
-        return vertices, faces, outer
+        return vertices, faces, outer, owner, []
     crossed = bad
     if bad[-1] >= loops:  # the whole fill of a loop that crosses, where it is a wall
         part = _edge_parts(faces[loops:])
@@ -505,9 +496,11 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     left_keys, left_owner = left_keys[order], np.tile(owner[bad], 3)[order]
     mend, key = close_gaps(local, kept, open_now, left_keys, WALL_FACING, keys)
     mended = np.zeros(len(infos), np.int64)
+    kept_owner = np.delete(owner, bad)
     if len(mend):
-        np.add.at(mended, left_owner[np.searchsorted(left_keys, key)], 1)
-        kept = np.vstack([kept, mend])
+        mend_owner = left_owner[np.searchsorted(left_keys, key)]
+        np.add.at(mended, mend_owner, 1)
+        kept, kept_owner = np.vstack([kept, mend]), np.r_[kept_owner, mend_owner]
         # a mend's edges: the open ones it closes, and chords two of its triangles share
         open_now = np.setdiff1d(open_now, _edge_keys(mend))
     left = np.bincount(owner[bad], minlength=len(infos))
@@ -520,6 +513,7 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     of_vertex[faces[bad].ravel()] = np.repeat(owner[bad], 3)
     lost = of_vertex[~used]
     gone = np.bincount(lost[lost >= 0], minlength=len(infos))
+    opened = []
     for i in np.flatnonzero(left).tolist():
         h = infos[i]
         why = (f"{crossing[i]:,} of its fill's triangles would cross the scan or another "
@@ -534,6 +528,7 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
         if (not h.filled or _in_sorted(np.r_[rim, patch], open_now).any()
                 or (gap and i >= len(rim_keys))):
             infos[i] = dataclasses.replace(h, filled=False, reason=why)
+            opened.append(i)
             continue
         infos[i] = h  # closed: its own gaps mended by chords, or none
         if gap:  # open is a loop beside it the loop stage had credited to it (a shared
@@ -549,9 +544,9 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
                                   int(np.count_nonzero(used[ends])), False,
                                   f"a gap beside hole {i}: {why}"))
     if used.all():
-        return vertices, kept, outer
+        return vertices, kept, outer, kept_owner, opened
     slot = np.cumsum(used) - 1
-    return vertices[used], slot[kept], [slot[loop] for loop in outer]
+    return vertices[used], slot[kept], [slot[loop] for loop in outer], kept_owner, opened
 
 
 def _still_open(faces: np.ndarray, outer: list[np.ndarray],
@@ -781,9 +776,18 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     _open_after_all(holes, infos, before, still_open)
     if partial:
         _closed_after_all(partial, infos, still_open)
-    vertices, all_faces, outer = _leave_out_crossings(
+    vertices, all_faces, outer, owner, opened = _leave_out_crossings(
         vertices, all_faces, outer, np.concatenate(owners), infos, len(faces), n_patched,
         n_base, R, [partial.get(i, _rim_keys_of(h.edges)) for i, h in enumerate(holes)], diag)
+    if opened:  # filled again whole, as loops in 3D, where that crosses nothing
+        rim_of = {i: np.unique(_rim_keys_of(holes[i].edges)) if i < len(holes) else None
+                  for i in opened}
+        vertices, all_faces, _, outer, done = refill_crossed(
+            vertices, all_faces, owner, outer, rim_of, R,
+            functools.partial(_hole_spacing, spacing=spacing), scan.points, WALL_FACING, n_base)
+        for i, (n_v, n_f) in done.items():
+            infos[i] = dataclasses.replace(infos[i], filled=True, reason=None,
+                                           vertices_added=n_v, faces_added=n_f)
     quality = np.r_[np.zeros(n_base), np.ones(len(vertices) - n_base)]
     mesh = Mesh(vertices, all_faces, vertex_quality=quality)
     border_edges = sum(len(loop) for loop in outer)

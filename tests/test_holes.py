@@ -1177,7 +1177,8 @@ def test_a_gap_the_border_walk_ran_through_is_closed_by_a_second_loop_pass(monke
         warnings.simplefilter("ignore")
         res = fill_holes(scan, seed=0, progress=False)
         with monkeypatch.context() as m:
-            m.setattr(holes_mod, "_leave_out_crossings", lambda v, f, outer, *_: (v, f, outer))
+            m.setattr(holes_mod, "_leave_out_crossings",
+                      lambda v, f, outer, owner, *_: (v, f, outer, owner, []))
             crossing = fill_holes(scan, seed=0, progress=False)
     big = [h for h in crossing.holes if h.rim_vertices > 100]
     assert len(big) == 1 and big[0].filled and big[0].reason is None
@@ -1229,8 +1230,9 @@ def test_a_loop_fill_that_crosses_leaves_the_hole_beside_it_filled() -> None:
     infos = [HoleInfo(0, 1.4, 10.0, (1.5, 1.5, 0.0), 4, True, None, 3, 5)]
     rim = _rim_keys_of(np.array([[7, 8], [8, 14], [14, 13], [13, 7]]))
     outer = outer_loops(faces[:-1], len(v))  # the grid's border and the fin's
-    out_v, out_f, _ = _leave_out_crossings(v, faces, outer, owner, infos, first, loops,
-                                           39, np.eye(3), [rim], 14.0)
+    out_v, out_f, _, out_owner, opened = _leave_out_crossings(
+        v, faces, outer, owner, infos, first, loops, 39, np.eye(3), [rim], 14.0)
+    assert opened == [] and np.array_equal(out_owner, owner[:first + 2])
     assert len(out_v) == 39  # the wall's vertices dropped
     assert len(out_f) == first + 2
     assert np.array_equal(out_f[first:], f[[12, 13]])  # the patch stays
@@ -1281,3 +1283,34 @@ def test_min_area_triangulation_takes_the_smaller_diagonal() -> None:
     free[0, 2] = free[2, 0] = False  # a diagonal the mesh has: the other one
     cost, pick = _min_area(quad, free)
     assert pick[0, 3] in (1, 2) and np.isfinite(cost[0, 3])
+
+
+@pytest.mark.parametrize("seed", [4, 16])
+def test_a_hole_on_a_cylinders_steep_side_is_filled_again_whole_when_its_fill_crosses(
+        seed, monkeypatch) -> None:
+    """The patch and the loop stage's fill of what it missed crossed each other there."""
+    import asrbf_mesh._holes as holes_mod
+    from asrbf_mesh._hole_cross import crossing_faces
+    from asrbf_mesh.evaluate._synthetic_holes import synthetic_holes
+
+    scan = synthetic_holes("cylinder", seed)  # a part-cylinder around the y axis
+    radius = float(np.median(np.hypot(scan.points[:, 0], scan.points[:, 2])))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(scan, seed=seed, progress=False)
+        with monkeypatch.context() as m:  # without the refill: left open
+            m.setattr(holes_mod, "refill_crossed",
+                      lambda v, f, owner, outer, *_: (v, f, owner, outer, {}))
+            before = fill_holes(scan, seed=seed, progress=False)
+    assert before.holes_filled < before.holes_found
+    assert res.holes_filled == res.holes_found == 1
+    (hole,) = res.holes
+    mesh = res.mesh
+    assert hole.faces_added == len(mesh.faces) - len(scan.faces)
+    assert hole.vertices_added == len(mesh.vertices) - len(scan.points)
+    assert len(crossing_faces(mesh.vertices, mesh.faces, len(scan.faces))) == 0
+    new = mesh.vertices[len(scan.points):]
+    assert np.abs(np.hypot(new[:, 0], new[:, 2]) - radius).max() < 0.01 * radius
+    assert len(boundary_loops(mesh.faces)) == 1  # the outer border only
+    half = np.vstack([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]], mesh.faces[:, [2, 0]]])
+    assert len(np.unique(half, axis=0)) == len(half)  # oriented as the scan, manifold
