@@ -28,7 +28,7 @@ from ._hole_find import used_once
 from ._hole_patch import away_from, grid_samples, triangulate
 
 __all__ = ["open_loops", "outer_loops", "split_loops", "boundary_cycles", "fill_loop",
-           "segments_cross", "simple_cycles"]
+           "rim_plane", "segments_cross", "simple_cycles"]
 
 
 def boundary_cycles(faces: np.ndarray) -> list[np.ndarray]:
@@ -179,14 +179,10 @@ def fill_loop(loop: np.ndarray, points: np.ndarray, spacing: float,
     if len(loop) < 3:
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64), "a loop of fewer than 3 vertices"
     rim = points[loop]
-    centre = rim.mean(axis=0)
-    _, _, vt = np.linalg.svd(rim - centre, full_matrices=False)
-    axes = vt[:2]
-    normal = vt[2]
-    q = (rim - centre) @ axes.T
-    coincide = np.unique(np.round(q / max(spacing, 1e-300), 6), axis=0).shape[0] < len(q)
-    if disk or coincide or segments_cross(q):  # the plane cannot hold the rim: a disk can
+    plane = None if disk else rim_plane(rim, spacing)
+    if plane is None:  # the plane cannot hold the rim: a disk can
         return _fill_by_disk(loop, rim)
+    centre, axes, normal, q = plane
     n = len(q)
     seg = np.column_stack([np.arange(n), np.roll(np.arange(n), -1)])
     tris, extra = triangulate(q, seg, "pYQ")
@@ -208,6 +204,20 @@ def fill_loop(loop: np.ndarray, points: np.ndarray, spacing: float,
     ids = np.concatenate([loop, -1 - np.arange(len(g))])
     out = ids[tris]
     return new, _oriented(out, loop), None
+
+
+def rim_plane(rim: np.ndarray, spacing: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """Return a rim's best-fit plane (centre, axes, normal, rim in it), or None.
+
+    None when the plane cannot hold the rim: two rim points coincide there (to a
+    millionth of ``spacing``) or the rim crosses itself.
+    """
+    centre = rim.mean(axis=0)
+    _, _, vt = np.linalg.svd(rim - centre, full_matrices=False)
+    q = (rim - centre) @ vt[:2].T
+    coincide = np.unique(np.round(q / max(spacing, 1e-300), 6), axis=0).shape[0] < len(q)
+    return None if coincide or segments_cross(q) else (centre, vt[:2], vt[2], q)
 
 
 #: At most about this many interior vertices in a disk fill (:func:`_fill_by_disk`).

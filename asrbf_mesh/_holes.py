@@ -72,7 +72,7 @@ from ._hole_close import (
 from ._hole_find import Hole, boundary_edges, find_holes, usable_faces
 from ._hole_layers import fill_layers
 from ._hole_patch import BLENDS, Ctx, Patch, fill_single
-from ._hole_refill import refill_crossed
+from ._hole_refill import folded_shares, refill_crossed
 from ._mesh import Mesh, Scan
 from ._network import Network
 from ._validate import check_choice, check_float, check_points, check_seed, parse_length
@@ -439,7 +439,7 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
                          owner: np.ndarray, infos: list[HoleInfo], first: int, loops: int,
                          n_base: int, R: np.ndarray, rim_keys: list[np.ndarray], diag: float
                          ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray,
-                                    list[int]]:
+                                    dict[int, float]]:
     """Leave out the fill triangles that cross the scan or another fill (updates ``infos``).
 
     :func:`~asrbf_mesh._hole_cross.crossing_faces` finds them among the faces from
@@ -458,16 +458,16 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     completed) or what its left-out patch triangles opened is open; when only a loop's
     fill credited to it is (a loop beside it, sharing a rim vertex), that gap is reported
     as a hole of its own. Vertices no face uses any more are dropped (the scan's are
-    kept, as every outer border's). Closing the gaps once more by the loop stage (in
-    the rim's plane) closed 2 of 177 (the views of the cow, bone and airplane, seeds
-    0-9): the fold that made the fill cross is still there.
+    kept, as every outer border's). Returns the vertices, faces and outer borders, each
+    face's owner, and the holes it opened with the share of their fills' triangles that
+    crossed their own (:func:`~asrbf_mesh._hole_refill.folded_shares`).
     """
     from ._hole_cross import crossing_faces, crossing_of
 
     local = vertices @ R  # R: the view frame's rotation
     bad = crossing_faces(local, faces, first)
     if len(bad) == 0:
-        return vertices, faces, outer, owner, []
+        return vertices, faces, outer, owner, {}
     crossed = bad
     if bad[-1] >= loops:  # the whole fill of a loop that crosses, where it is a wall
         part = _edge_parts(faces[loops:])
@@ -543,6 +543,7 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
                                   tuple(float(x) for x in vertices[ends].mean(axis=0)),
                                   int(np.count_nonzero(used[ends])), False,
                                   f"a gap beside hole {i}: {why}"))
+    opened = folded_shares(local, faces, owner, opened)
     if used.all():
         return vertices, kept, outer, kept_owner, opened
     slot = np.cumsum(used) - 1
@@ -783,11 +784,13 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         rim_of = {i: np.unique(_rim_keys_of(holes[i].edges)) if i < len(holes) else None
                   for i in opened}
         vertices, all_faces, _, outer, done = refill_crossed(
-            vertices, all_faces, owner, outer, rim_of, R,
+            vertices, all_faces, owner, outer, rim_of, opened, R,
             functools.partial(_hole_spacing, spacing=spacing), scan.points, WALL_FACING, n_base)
-        for i, (n_v, n_f) in done.items():
-            infos[i] = dataclasses.replace(infos[i], filled=True, reason=None,
-                                           vertices_added=n_v, faces_added=n_f)
+        for i, (n_v, n_f, whole) in done.items():
+            h = infos[i]
+            infos[i] = dataclasses.replace(h, filled=True, reason=None,
+                                           vertices_added=n_v + h.vertices_added * (not whole),
+                                           faces_added=n_f + h.faces_added * (not whole))
     quality = np.r_[np.zeros(n_base), np.ones(len(vertices) - n_base)]
     mesh = Mesh(vertices, all_faces, vertex_quality=quality)
     border_edges = sum(len(loop) for loop in outer)

@@ -1232,7 +1232,7 @@ def test_a_loop_fill_that_crosses_leaves_the_hole_beside_it_filled() -> None:
     outer = outer_loops(faces[:-1], len(v))  # the grid's border and the fin's
     out_v, out_f, _, out_owner, opened = _leave_out_crossings(
         v, faces, outer, owner, infos, first, loops, 39, np.eye(3), [rim], 14.0)
-    assert opened == [] and np.array_equal(out_owner, owner[:first + 2])
+    assert opened == {} and np.array_equal(out_owner, owner[:first + 2])
     assert len(out_v) == 39  # the wall's vertices dropped
     assert len(out_f) == first + 2
     assert np.array_equal(out_f[first:], f[[12, 13]])  # the patch stays
@@ -1314,3 +1314,28 @@ def test_a_hole_on_a_cylinders_steep_side_is_filled_again_whole_when_its_fill_cr
     assert len(boundary_loops(mesh.faces)) == 1  # the outer border only
     half = np.vstack([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]], mesh.faces[:, [2, 0]]])
     assert len(np.unique(half, axis=0)) == len(half)  # oriented as the scan, manifold
+
+
+def test_folded_shares_and_the_near_faces_test_agree_with_every_pair() -> None:
+    """A fill's own crossings, and a fill's crossings against the faces near it only."""
+    from asrbf_mesh._hole_cross import crossing_faces
+    from asrbf_mesh._hole_refill import _Near, folded_shares
+
+    x, y = np.meshgrid(np.arange(8.0), np.arange(8.0))
+    grid = np.column_stack([x.ravel(), y.ravel(), np.zeros(64)])
+    fin = [[3.2, 3.5, -1.0], [3.8, 3.5, -1.0], [3.5, 3.5, 1.0]]  # through the grid
+    cut = [[3.5, 3.1, -1.0], [3.5, 3.9, -1.0], [3.5, 3.5, 1.0]]  # through the fin
+    v = np.vstack([grid, fin, cut])
+    faces = np.vstack([grid_faces(8, 8), [[64, 65, 66], [67, 68, 69]]])
+    owner = np.r_[np.full(len(faces) - 2, -1), 0, 0]
+    assert folded_shares(v, faces, owner, [0]) == {0: 1.0}
+    assert folded_shares(v, faces[:-1], owner[:-1], [0]) == {0: 0.0}
+    near = _Near(v, faces[:-2])
+    rng = np.random.default_rng(0)
+    for _ in range(40):  # random fills of one or two new triangles over the grid
+        p = np.c_[rng.uniform(0, 7, (4, 2)), rng.uniform(-0.5, 0.5, 4)]
+        t = np.array([[-1, -2, -3], [-2, -4, -3]])[: rng.integers(1, 3)]
+        every = crossing_faces(np.vstack([v[:64], p]), np.vstack([faces[:-2],
+                                                                  np.where(t < 0, 63 - t, t)]),
+                               len(faces) - 2)
+        assert near.crosses(p, t, np.zeros(0, np.int64)) == bool(len(every))
