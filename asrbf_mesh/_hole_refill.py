@@ -16,6 +16,7 @@ a surface) and crosses nothing; else the hole stays as it was.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -23,6 +24,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from . import _holes_kernels as _hk
+from ._forked import map_forked
 from ._hole_close import (
     _chords_avoiding,
     _edge_keys,
@@ -35,16 +37,16 @@ from ._hole_close import (
 from ._hole_cross import crossing_faces, crossing_of
 from ._hole_loops import fill_loop, outer_loops, rim_plane, simple_cycles
 
-__all__ = ["FOLDED", "folded_shares", "refill_crossed"]
+__all__ = ["LOST", "refill_crossed"]
 
-#: A hole's whole fill is replaced only when at least this share of its triangles crossed
-#: others of its own: it had folded over itself (the synthetic cylinders' sides, seeds
-#: 0-49: 1.7-49 %, a fill of 10,708 triangles where the refill takes 180); a fill that
-#: crossed itself in fewer places was the better surface but there (bun090 punched with
-#: seed 6: 0.57 %, 54 of 9,543, its 123-vertex hole refilled whole at 0.273 % RMS where
-#: its view-plane patch, the crossing triangles left out, had 0.147 %; the synthetic
-#: folds 0-0.9 %).
-FOLDED = 0.01
+#: A hole's whole fill is replaced only when at least this share of its triangles were left
+#: out for crossing: it had folded over itself (the synthetic cylinders' sides, seeds
+#: 0-49: 5-99.7 %, a fill of 10,708 triangles where the refill takes 180); a fill that
+#: lost fewer was the better surface but there (punched views syn225 seed 4 and syn135
+#: seed 9: 1.7 and 2.1 %, their holes refilled whole at 0.288 and 0.284 % RMS where the
+#: view-plane patches, the crossing triangles left out, had 0.107 and 0.173 %; bun090
+#: seed 6: 0.4 %, 0.273 against 0.147 %).
+LOST = 0.04
 
 #: :class:`_Near`: faces whose view-plane box reaches more than this many times the
 #: median's are tested against every fill.
@@ -209,7 +211,7 @@ def _refill(cycles: list[np.ndarray], vertices: np.ndarray, R: np.ndarray,
 
 def refill_crossed(vertices: np.ndarray, faces: np.ndarray, owner: np.ndarray,
                    outer: list[np.ndarray], todo: dict[int, np.ndarray | None],
-                   folded: dict[int, float], R: np.ndarray,
+                   lost: dict[int, float], R: np.ndarray,
                    step_of: Callable[[np.ndarray], float], scan_points: np.ndarray,
                    wall_facing: float, n_keep: int
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[np.ndarray],
@@ -217,9 +219,9 @@ def refill_crossed(vertices: np.ndarray, faces: np.ndarray, owner: np.ndarray,
     """Fill again, as loops in 3D, the holes of ``todo`` that their fills left open.
 
     ``todo``: each hole's index and its rim's sorted edge keys (None: not known);
-    ``folded``: each one's share of fill triangles that crossed its own
-    (:func:`folded_shares`); a hole is first closed where its fill left it open, and
-    its whole fill goes only when :data:`FOLDED` of it or more crossed itself;
+    ``lost``: each one's share of fill triangles left out for crossing; a hole is first
+    closed where its fill left it open, and its whole fill goes only when :data:`LOST`
+    of it or more was left out;
     ``owner``: each face's hole (-1: the scan's); ``step_of``: a loop's fill spacing from
     its rim edges' ends in the view plane, (E, 2, 2); ``n_keep``: the vertices kept
     whatever uses them (the scan's). Holes whose regions share a vertex are not both
@@ -240,31 +242,22 @@ def refill_crossed(vertices: np.ndarray, faces: np.ndarray, owner: np.ndarray,
         n_ids = len(ids)
         graph = coo_matrix((np.ones(len(bnd)), (e[:, 0], e[:, 1])), shape=(n_ids, n_ids))
         part[ids] = connected_components(graph, directed=False)[1]
+    state = (faces, owner, keys, count, bnd, part, border, todo, lost, vertices, R,
+             step_of, scan_points, tree, near, wall_facing)
+    holes = list(todo)
+    tried = map_forked(_attempts, state, holes, cost=[np.count_nonzero(owner == i) + len(
+        todo[i] if todo[i] is not None else ()) for i in holes])
     taken = np.zeros(len(vertices), dtype=bool)
     plans: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
     reborder = set()  # the holes whose fills had closed a bit of an outer border
-    none = np.zeros(0, np.int64)
-    for i, rim in todo.items():
-        own = np.flatnonzero(owner == i)
-        rim = none if rim is None else rim
-        # what its fill left open first, its fill kept; else the whole hole, its fill out
-        tries = [(none, np.union1d(rim, _edge_keys(faces[own])))]
-        if folded[i] >= FOLDED:  # a fill folded over itself goes whole
-            tries.append((own, none if len(own) else rim))
-        for mine, seeds in tries:
-            found = _region_loops(faces, mine, keys, count, bnd, part, border,
-                                  todo[i], seeds)
-            if found is None:
-                continue
-            region = np.unique(np.concatenate([faces[own].ravel(), *found[0]]))
+    for i, attempts in zip(holes, tried, strict=True):  # in order: the first one's region
+        for mine, region, fill, changes_border in attempts:
             if taken[region].any():  # a neighbour's region: not both
                 break
-            fill = _refill(found[0], vertices, R, step_of, scan_points, tree,
-                           _Remaining(keys, found[1]), near, mine, wall_facing)
             if fill is not None:
                 plans[i] = (mine, *fill)
                 taken[region] = True
-                if found[2]:
+                if changes_border:
                     reborder.add(i)
                 break
     done: dict[int, tuple[int, int, bool]] = {}
@@ -283,13 +276,33 @@ def refill_crossed(vertices: np.ndarray, faces: np.ndarray, owner: np.ndarray,
     return vertices, faces, owner, outer, done
 
 
-def folded_shares(local: np.ndarray, faces: np.ndarray, owner: np.ndarray,
-                  holes: list[int]) -> dict[int, float]:
-    """Each hole's share of its fill triangles that cross other triangles of its fill."""
-    out = {}
-    for i in holes:
-        own = faces[owner == i]
-        out[i] = len(crossing_faces(local, own, 0)) / len(own) if len(own) else 0.0
+def _attempts(state: tuple, i: int) -> list[tuple[np.ndarray, np.ndarray, Any, bool]]:
+    """Hole ``i``'s refills, until one holds: (faces out, region, fill or None, border).
+
+    First what its fill left open, its fill kept; then, where :data:`LOST` of its fill
+    or more was left out for crossing, the whole hole, its fill out. A job of :func:`map_forked`
+    (``state``: what :func:`refill_crossed` shares): whether a region is taken by an
+    earlier hole is judged after, in order, as if the holes had been tried one by one.
+    """
+    (faces, owner, keys, count, bnd, part, border, todo, lost, vertices, R, step_of,
+     scan_points, tree, near, wall_facing) = state
+    none = np.zeros(0, np.int64)
+    own = np.flatnonzero(owner == i)
+    rim = none if todo[i] is None else todo[i]
+    tries = [(none, np.union1d(rim, _edge_keys(faces[own])))]
+    if lost[i] >= LOST:  # a fill folded over itself goes whole
+        tries.append((own, none if len(own) else rim))
+    out = []
+    for mine, seeds in tries:
+        found = _region_loops(faces, mine, keys, count, bnd, part, border, todo[i], seeds)
+        if found is None:
+            continue
+        region = np.unique(np.concatenate([faces[own].ravel(), *found[0]]))
+        fill = _refill(found[0], vertices, R, step_of, scan_points, tree,
+                       _Remaining(keys, found[1]), near, mine, wall_facing)
+        out.append((mine, region, fill, found[2]))
+        if fill is not None:
+            break
     return out
 
 

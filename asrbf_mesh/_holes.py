@@ -72,7 +72,7 @@ from ._hole_close import (
 from ._hole_find import Hole, boundary_edges, find_holes, usable_faces
 from ._hole_layers import fill_layers
 from ._hole_patch import BLENDS, Ctx, Patch, fill_single
-from ._hole_refill import folded_shares, refill_crossed
+from ._hole_refill import refill_crossed
 from ._mesh import Mesh, Scan
 from ._network import Network
 from ._validate import check_choice, check_float, check_points, check_seed, parse_length
@@ -459,8 +459,8 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
     fill credited to it is (a loop beside it, sharing a rim vertex), that gap is reported
     as a hole of its own. Vertices no face uses any more are dropped (the scan's are
     kept, as every outer border's). Returns the vertices, faces and outer borders, each
-    face's owner, and the holes it opened with the share of their fills' triangles that
-    crossed their own (:func:`~asrbf_mesh._hole_refill.folded_shares`).
+    face's owner, and the holes it opened with the share of their fills' triangles left
+    out.
     """
     from ._hole_cross import crossing_faces, crossing_of
 
@@ -543,7 +543,8 @@ def _leave_out_crossings(vertices: np.ndarray, faces: np.ndarray, outer: list[np
                                   tuple(float(x) for x in vertices[ends].mean(axis=0)),
                                   int(np.count_nonzero(used[ends])), False,
                                   f"a gap beside hole {i}: {why}"))
-    opened = folded_shares(local, faces, owner, opened)
+    kept_count = np.bincount(kept_owner[kept_owner >= 0], minlength=len(infos))
+    opened = {i: left[i] / max(left[i] + kept_count[i], 1) for i in opened}
     if used.all():
         return vertices, kept, outer, kept_owner, opened
     slot = np.cumsum(used) - 1

@@ -1316,26 +1316,20 @@ def test_a_hole_on_a_cylinders_steep_side_is_filled_again_whole_when_its_fill_cr
     assert len(np.unique(half, axis=0)) == len(half)  # oriented as the scan, manifold
 
 
-def test_folded_shares_and_the_near_faces_test_agree_with_every_pair() -> None:
-    """A fill's own crossings, and a fill's crossings against the faces near it only."""
+def test_the_near_faces_test_of_a_refill_agrees_with_every_pair() -> None:
+    """A fill's crossings against the faces near it only, as against every face."""
     from asrbf_mesh._hole_cross import crossing_faces
-    from asrbf_mesh._hole_refill import _Near, folded_shares
+    from asrbf_mesh._hole_refill import _Near
 
     x, y = np.meshgrid(np.arange(8.0), np.arange(8.0))
-    grid = np.column_stack([x.ravel(), y.ravel(), np.zeros(64)])
-    fin = [[3.2, 3.5, -1.0], [3.8, 3.5, -1.0], [3.5, 3.5, 1.0]]  # through the grid
-    cut = [[3.5, 3.1, -1.0], [3.5, 3.9, -1.0], [3.5, 3.5, 1.0]]  # through the fin
-    v = np.vstack([grid, fin, cut])
-    faces = np.vstack([grid_faces(8, 8), [[64, 65, 66], [67, 68, 69]]])
-    owner = np.r_[np.full(len(faces) - 2, -1), 0, 0]
-    assert folded_shares(v, faces, owner, [0]) == {0: 1.0}
-    assert folded_shares(v, faces[:-1], owner[:-1], [0]) == {0: 0.0}
-    near = _Near(v, faces[:-2])
+    v = np.column_stack([x.ravel(), y.ravel(), np.zeros(64)])
+    faces = np.vstack([grid_faces(8, 8), [[0, 9, 63]]])  # and one long face across it
+    v[63, 2] = 0.5
+    near = _Near(v, faces)
     rng = np.random.default_rng(0)
     for _ in range(40):  # random fills of one or two new triangles over the grid
         p = np.c_[rng.uniform(0, 7, (4, 2)), rng.uniform(-0.5, 0.5, 4)]
         t = np.array([[-1, -2, -3], [-2, -4, -3]])[: rng.integers(1, 3)]
-        every = crossing_faces(np.vstack([v[:64], p]), np.vstack([faces[:-2],
-                                                                  np.where(t < 0, 63 - t, t)]),
-                               len(faces) - 2)
+        every = crossing_faces(np.vstack([v, p]), np.vstack([faces, np.where(t < 0, 63 - t, t)]),
+                               len(faces))
         assert near.crosses(p, t, np.zeros(0, np.int64)) == bool(len(every))
