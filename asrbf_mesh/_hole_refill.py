@@ -1,16 +1,18 @@
-"""A hole whose fill crosses itself, filled again as one loop in 3D.
+"""A hole that its fill's crossings leave open, filled again in 3D.
 
 The view-plane patch of a hole on a steep side (a cylinder's side, a fold) misses rim
 edges; the loop stage closes what it missed in the rim's own plane, and that fill can
 run through the patch and through itself. :func:`~asrbf_mesh._holes._leave_out_crossings`
 then leaves the crossing triangles out and the hole open (synthetic cylinder sides: 20
-of 44 open, every crossing within the hole's own fill). Here such a hole loses its whole
-fill, and the region that opens (its rim, with whatever of the fill's neighbours it
-touched) is filled again loop by loop as the loop stage fills a loop
-(:func:`~asrbf_mesh._hole_loops.fill_loop`: the rim's best-fit plane and a thin plate
-of the scan around it, else a faired disk). The new fill is kept only when it joins the
-mesh manifold, faces the view (a fill seen edge-on is a wall across a depth step, not
-a surface) and crosses nothing; else the hole stays as it was.
+of 44 open, every crossing within the hole's own fill). Here such a hole is closed
+where its fill left it open, its fill kept; where :data:`LOST` of its fill or more was
+left out, the fill had folded over itself: it goes whole, and the region that opens
+(its rim, with whatever of the fill's neighbours it touched) is filled anew. Each loop
+takes the first of the loop stage's fill in its rim's plane
+(:func:`~asrbf_mesh._hole_loops.fill_loop`: a thin plate of the scan around it), a
+faired disk and the minimum-area triangulation by chords that joins the mesh manifold,
+faces the view (a fill seen edge-on is a wall across a depth step, not a surface) and
+crosses nothing; else the hole stays as it was.
 """
 
 from __future__ import annotations
