@@ -189,6 +189,14 @@ def _edge_keys(tris: np.ndarray) -> np.ndarray:
 _GAP_MAX = 8
 
 
+def facing(local: np.ndarray, tris: np.ndarray) -> float:
+    """Area-weighted mean of |n . view| over triangles (1: seen face-on, 0: edge-on)."""
+    t = local[tris]
+    normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    area = float(np.linalg.norm(normal, axis=1).sum())
+    return float(np.abs(normal[:, 2]).sum()) / area if area > 0 else 0.0
+
+
 def _edge_parts(tris: np.ndarray) -> np.ndarray:
     """Label of each triangle's part, triangles joined by shared edges."""
     from scipy.sparse import coo_matrix
@@ -367,10 +375,7 @@ def close_gaps(local: np.ndarray, faces: np.ndarray, still_open: np.ndarray,
         t = _chords_avoiding(c, local, known)
         if len(t) == 0:
             continue
-        tri = local[t]
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        area = float(np.linalg.norm(normal, axis=1).sum())
-        if area <= 0.0 or float(np.abs(normal[:, 2]).sum()) < wall_facing * area:
+        if facing(local, t) < wall_facing:
             continue
         known.add(_edge_keys(t))
         tris.append(t)

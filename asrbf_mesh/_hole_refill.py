@@ -35,6 +35,7 @@ from ._hole_close import (
     _in_sorted,
     _rim_keys,
     _rim_keys_of,
+    facing,
 )
 from ._hole_cross import crossing_faces, crossing_of
 from ._hole_loops import fill_loop, outer_loops, rim_plane, simple_cycles
@@ -70,14 +71,6 @@ class _Remaining(_EdgeSet):
 def _half_edges(faces: np.ndarray) -> np.ndarray:
     """(3F, 2) half-edges in :func:`~asrbf_mesh._hole_close._edge_keys`' order."""
     return np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-
-
-def _facing(local: np.ndarray, tris: np.ndarray) -> float:
-    """Area-weighted mean of |n . view| over triangles (1: seen face-on, 0: edge-on)."""
-    t = local[tris]
-    normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    area = float(np.linalg.norm(normal, axis=1).sum())
-    return float(np.abs(normal[:, 2]).sum()) / area if area > 0 else 0.0
 
 
 def _region_loops(faces: np.ndarray, mine: np.ndarray, keys: np.ndarray, count: np.ndarray,
@@ -202,7 +195,7 @@ def _refill(cycles: list[np.ndarray], vertices: np.ndarray, R: np.ndarray,
             vl = v @ R
             rim = np.unique(t[t >= 0])
             tt = np.where(t < 0, len(rim) - t - 1, np.searchsorted(rim, np.maximum(t, 0)))
-            if (_facing(np.vstack([local[rim], vl]), tt) >= wall_facing
+            if (facing(np.vstack([local[rim], vl]), tt) >= wall_facing
                     and not near.crosses(vl, t, skip)):
                 break
         else:
@@ -249,7 +242,8 @@ def refill_crossed(vertices: np.ndarray, faces: np.ndarray, owner: np.ndarray,
     state = (faces, owner, keys, count, bnd, part, border, todo, lost, vertices, R,
              step_of, scan_points, tree, near, wall_facing)
     holes = list(todo)
-    tried = map_forked(_attempts, state, holes, cost=[np.count_nonzero(owner == i) + len(
+    n_own = np.bincount(owner[owner >= 0], minlength=max(holes) + 1)
+    tried = map_forked(_attempts, state, holes, cost=[n_own[i] + len(
         todo[i] if todo[i] is not None else ()) for i in holes])
     taken = np.zeros(len(vertices), dtype=bool)
     plans: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
