@@ -221,10 +221,10 @@ def _fill_one(hole: Hole, ctx: Ctx) -> tuple[Patch, str | None]:
     if spacing != ctx.spacing:
         ctx = dataclasses.replace(ctx, spacing=spacing)
     patch = fill_single(hole, ctx)
-    if patch.missing:  # a fold: the rim crosses itself, or another layer covers the hole
-        layered = fill_layers(hole, ctx)
-        if layered is not None and layered.missing < patch.missing:
-            patch = layered
+    layered = fill_layers(hole, ctx)  # the rim on two layers (a fold, a cliff): each alone
+    if layered is not None and (layered.missing < patch.missing or (
+            not layered.missing and len(layered.tris))):
+        patch = layered
     if not patch.missing:
         return patch, None
     why = f" ({patch.note})" if patch.note else ""
