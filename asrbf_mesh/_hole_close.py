@@ -322,6 +322,13 @@ class _EdgeSet:
         """``keys`` as an edge set (an array of keys is sorted first)."""
         return keys if isinstance(keys, _EdgeSet) else cls(np.unique(keys))
 
+    def with_keys(self, keys: np.ndarray) -> _EdgeSet:
+        """Return a copy that also holds ``keys`` (this set unchanged)."""
+        out = _EdgeSet.__new__(_EdgeSet)
+        out._base, out._added = self._base, set(self._added)
+        out.add(keys)
+        return out
+
     def add(self, keys: np.ndarray) -> None:
         self._added.update(np.asarray(keys, dtype=np.int64).ravel().tolist())
 

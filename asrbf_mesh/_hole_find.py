@@ -7,6 +7,7 @@ to the far margin are the outside (the outer border, never filled), the others a
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,7 +15,7 @@ import numpy as np
 from . import _holes_kernels as _hk
 from ._footprint import Footprint, _label_bays
 
-__all__ = ["Hole", "boundary_edges", "chains", "find_holes", "usable_faces"]
+__all__ = ["Hole", "boundary_edges", "chains", "find_holes", "usable_faces", "usable_faces_warned"]
 
 
 @dataclass
@@ -80,6 +81,21 @@ def usable_faces(faces: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         fixes["turned"] = int(flip.sum())
         f = out
     return f, fixes
+
+
+def usable_faces_warned(faces: np.ndarray | None, source: str | None) -> np.ndarray | None:
+    """Return the faces the fill can use (:func:`usable_faces`), with a warning on fixes."""
+    if faces is None or len(faces) == 0:
+        return faces
+    faces, fixes = usable_faces(faces)
+    said = [f"{n:,} {what}" for what, n in (
+        ("faces with a repeated vertex left out", fixes["repeated"]),
+        ("copies of faces left out", fixes["copies"]),
+        ("fins left out (faces on an edge of more than two)", fixes["fins"]),
+        ("faces turned to agree with their neighbours", fixes["turned"])) if n]
+    if said:
+        warnings.warn(f"{source or 'scan'}: {', '.join(said)}", stacklevel=3)
+    return faces
 
 
 def _fins(f: np.ndarray) -> np.ndarray:

@@ -158,15 +158,16 @@ def fill_layers(hole: Hole, ctx: Ctx) -> Patch | None:
     triangles seen edge-on (the fold's wall) are set aside; each layer's part of the rim
     is closed by its chord (the unseen fold edge) and filled like a hole of its own,
     from that layer's own surroundings only. The fold's silhouette stays a boundary, as
-    it is in the scan (the loop stage closes what lies between two layers' fills where
-    that crosses nothing). Returns None when the rim lies on one layer.
+    it is in the scan, unless the wall between two layers' fills is closed
+    (:mod:`~asrbf_mesh._hole_wall`). Returns None when the rim lies on one layer.
 
-    ``_holes._fill_one`` takes this fill whenever it closes the rim, not only where one
-    patch could not (a rim crossing itself in the view plane): a disk punched across an
-    occlusion (bun090's ear and the head behind it) or across a cliff has a rim that is a
-    simple polygon in the view plane, and one surface over it ramps from one layer to the
-    other (bun090 punched with seed 13: 0.719 -> 0.249 % RMS; synthetic cliffs, seeds
-    0-49: 7 holes, RMS of the truth up to 0.95 -> 0.14 units).
+    ``_holes._fill_one`` takes this fill with the wall between its layers closed
+    (:func:`~asrbf_mesh._hole_wall.close_wall`) wherever that joins the mesh manifold and
+    crosses no scan face, not only where one patch cannot close the rim (a rim crossing
+    itself in the view plane): a disk punched across an occlusion (bun090's ear and the
+    head behind it) or across a cliff has a rim that is a simple polygon in the view
+    plane, and one surface over it ramps from one layer to the other (bun090 punched with
+    seed 13: 0.719 -> 0.247 % RMS).
     """
     reach = ring_reach(hole.size, ctx.spacing)
     split = _fold_layers(hole, ctx, reach)

@@ -138,6 +138,7 @@ class Ctx:
     boundary: np.ndarray  # (B, 2) the scan's boundary edges
     substrates: dict = field(default_factory=dict)  # :func:`_lowpass`'s cache
     piece: np.ndarray | None = None  # each scan vertex's piece (None: one piece)
+    cache: dict = field(default_factory=dict)  # built on first use (``_hole_wall``)
 
 
 class Patch(NamedTuple):

@@ -43,7 +43,6 @@ import dataclasses
 import functools
 import os
 import time
-import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -69,10 +68,11 @@ from ._hole_close import (
     _winds_as_hole,
     close_gaps,
 )
-from ._hole_find import Hole, boundary_edges, find_holes, usable_faces
+from ._hole_find import Hole, boundary_edges, find_holes, usable_faces_warned
 from ._hole_layers import fill_layers
 from ._hole_patch import BLENDS, Ctx, Patch, fill_single
 from ._hole_refill import refill_crossed
+from ._hole_wall import close_wall, fill_across_wall
 from ._mesh import Mesh, Scan
 from ._network import Network
 from ._validate import check_choice, check_float, check_points, check_seed, parse_length
@@ -222,9 +222,9 @@ def _fill_one(hole: Hole, ctx: Ctx) -> tuple[Patch, str | None]:
         ctx = dataclasses.replace(ctx, spacing=spacing)
     patch = fill_single(hole, ctx)
     layered = fill_layers(hole, ctx)  # the rim on two layers (a fold, a cliff): each alone
-    if layered is not None and (layered.missing < patch.missing or (
-            not layered.missing and len(layered.tris))):
-        patch = layered
+    if layered is not None:  # with the wall between closed, else where one patch cannot
+        walled = close_wall(hole, layered, ctx)
+        patch = walled or (layered if layered.missing < patch.missing else patch)
     if not patch.missing:
         return patch, None
     why = f" ({patch.note})" if patch.note else ""
@@ -249,21 +249,6 @@ def _loop_job(state: tuple[np.ndarray, np.ndarray, cKDTree],
     return fill_loop(loop, vertices, step, scan_points, tree)
 
 
-def _usable(faces: np.ndarray | None, source: str | None) -> np.ndarray | None:
-    """Return the faces the fill can use (:func:`usable_faces`), with a warning on fixes."""
-    if faces is None or len(faces) == 0:
-        return faces
-    faces, fixes = usable_faces(faces)
-    said = [f"{n:,} {what}" for what, n in (
-        ("faces with a repeated vertex left out", fixes["repeated"]),
-        ("copies of faces left out", fixes["copies"]),
-        ("fins left out (faces on an edge of more than two)", fixes["fins"]),
-        ("faces turned to agree with their neighbours", fixes["turned"])) if n]
-    if said:
-        warnings.warn(f"{source or 'scan'}: {', '.join(said)}", stacklevel=3)
-    return faces
-
-
 def _as_scan(scan: Any) -> Scan:
     """Return the scan to fill: a Scan as it is, a Mesh as its vertices and faces, or points."""
     if isinstance(scan, Scan):
@@ -280,8 +265,8 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                  rims: list[set[int]], hole_keys: np.ndarray, ccw: bool,
                  scan_points: np.ndarray, R: np.ndarray, spacing: float,
                  limit: float | None, diag: float, big_keys: np.ndarray | None = None,
-                 owners: list[np.ndarray] | None = None, only: np.ndarray | None = None
-                 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+                 owners: list[np.ndarray] | None = None, only: np.ndarray | None = None,
+                 wall: Any = None) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Fill the enclosed boundary loops the view-plane fills left open (in their own plane).
 
     Updates ``infos`` in place: a hole whose rim the loop shares becomes filled; a loop
@@ -355,7 +340,10 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                 rims.append(set())  # rims[i] stays the rim of infos[i]
             continue
         v, t, reason = firsts[j]
-        if not len(t) or not _fits(t, loop, known):  # refused, or no plane fill at all
+        layered = None if wall is None else wall(loop, size, step, vertices, R=R, known=known)
+        if layered is not None:  # over two layers and a wall: each on its own
+            (v, t), reason = layered, None
+        elif not len(t) or not _fits(t, loop, known):  # refused, or no plane fill at all
             if len(np.unique(loop)) < len(loop):  # pinched: each cycle on its own
                 v, t, reason = _fill_cycles(loop, vertices, step, scan_points, tree, known,
                                             R, ccw, parts)
@@ -684,7 +672,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     xy = np.ascontiguousarray(local[:, :2])
     depth = local[:, 2]
     spacing = sampling_spacing(xy)
-    faces = _usable(scan.faces, scan.source)
+    faces = usable_faces_warned(scan.faces, scan.source)
     if faces is None or len(faces) == 0:
         faces = point_cloud_faces(xy, spacing)
     if len(faces) == 0:
@@ -765,15 +753,17 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         _rim_keys_of(h.edges) for h in holes if limit is not None and h.size > limit]))
     loop_args = (ccw, scan.points, R, spacing, limit, diag, big_keys, owners)
     n_patched = len(all_faces)  # the view-plane patches' faces end here, the loops' begin
+    wall = functools.partial(fill_across_wall, ctx=ctx)
     vertices, all_faces, outer = _close_loops(vertices, all_faces, infos, rims, hole_keys,
-                                              *loop_args)
+                                              *loop_args, wall=wall)
     still_open = _still_open(all_faces, outer)
     if _in_sorted(still_open, hole_keys).any():
         # a gap the outer border's walk ran through (pinched to it at a vertex) may be a
         # loop of its own once the other loops are filled: one more pass (TUM desk2 as a
         # mesh: an 11-edge gap down a depth step, 28 rim edges of a 158-vertex hole)
         vertices, all_faces, outer = _close_loops(vertices, all_faces, infos, rims,
-                                                  hole_keys, *loop_args, only=hole_keys)
+                                                  hole_keys, *loop_args, only=hole_keys,
+                                                  wall=wall)
         still_open = _still_open(all_faces, outer)
     _open_after_all(holes, infos, before, still_open)
     if partial:
