@@ -26,16 +26,11 @@ from ._hole_close import _chords_avoiding, _edge_keys, _edge_parts, _EdgeSet, _f
 from ._hole_find import Hole
 from ._hole_layers import fill_layers
 from ._hole_patch import Ctx, Patch
-from ._hole_refill import _Near
+from ._hole_refill import _half_edges, _Near
 
 __all__ = ["close_wall", "fill_across_wall"]
 
 _B = np.int64(1) << np.int64(31)  # half-edge key base: a * 2**31 + b
-
-
-def _half_edges(tris: np.ndarray) -> np.ndarray:
-    """(3T, 2) directed edges of the triangles: ab, bc, ca."""
-    return np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]).astype(np.int64)
 
 
 def _open_cycles(half: np.ndarray) -> list[np.ndarray] | None:
