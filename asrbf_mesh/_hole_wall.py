@@ -124,15 +124,15 @@ def close_wall(hole: Hole, layered: Patch, ctx: Ctx) -> Patch | None:
 
 def fill_across_wall(loop: np.ndarray, size: float, step: float, vertices: np.ndarray,
                      ctx: Ctx, R: np.ndarray, known: _EdgeSet
-                     ) -> tuple[np.ndarray, np.ndarray] | None:
+                     ) -> tuple[np.ndarray, np.ndarray, int] | None:
     """Fill a loop of scan vertices layer by layer, then the wall between the layers.
 
     ``loop`` runs in its faces' direction (as :func:`~asrbf_mesh._hole_loops.fill_loop`
     takes it); ``vertices`` are the mesh's (world units; the scan's first, so that a scan
     vertex's id is its index in ``ctx``), ``R`` the view frame's rotation, ``known`` the
-    mesh's edges. Returns the new vertices (world units) and triangles (mesh ids >= 0,
-    new vertex ``k`` as ``-1 - k``), or None when the loop lies on one layer, the fill
-    does not close it manifold or crosses the scan.
+    mesh's edges. Returns the new vertices (world units), triangles (mesh ids >= 0,
+    new vertex ``k`` as ``-1 - k``) and the number of layers filled, or None when the
+    loop lies on one layer, the fill does not close it manifold or crosses the scan.
     """
     n_scan = len(ctx.xy)
     if len(loop) < 6 or int(loop.max()) >= n_scan:
@@ -149,4 +149,4 @@ def fill_across_wall(loop: np.ndarray, size: float, step: float, vertices: np.nd
     out = np.where(out >= n, n - out - 1, out)  # new vertices as -1 - k
     if _scan_near(ctx).crosses(patch.verts, out, np.zeros(0, np.int64)):
         return None
-    return patch.verts @ R.T, out
+    return patch.verts @ R.T, out, patch.layers

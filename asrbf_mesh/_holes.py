@@ -339,10 +339,10 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                                       "scan units)"))
                 rims.append(set())  # rims[i] stays the rim of infos[i]
             continue
-        v, t, reason = firsts[j]
+        (v, t, reason), layers = firsts[j], 1
         layered = None if wall is None else wall(loop, size, step, vertices, R=R, known=known)
         if layered is not None:  # over two layers and a wall: each on its own
-            (v, t), reason = layered, None
+            (v, t, layers), reason = layered, None
         elif not len(t) or not _fits(t, loop, known):  # refused, or no plane fill at all
             if len(np.unique(loop)) < len(loop):  # pinched: each cycle on its own
                 v, t, reason = _fill_cycles(loop, vertices, step, scan_points, tree, known,
@@ -370,11 +370,12 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
                 infos[i] = dataclasses.replace(
                     h, filled=True, reason=None,
                     vertices_added=h.vertices_added + len(v) * mine,
-                    faces_added=h.faces_added + len(t) * mine)
+                    faces_added=h.faces_added + len(t) * mine,
+                    layers=max(h.layers, layers) if mine else h.layers)
         else:
             infos.append(HoleInfo(len(infos), size, 100.0 * size / diag,
                                   tuple(float(x) for x in vertices[loop].mean(axis=0)),
-                                  len(loop), True, None, len(v), len(t)))
+                                  len(loop), True, None, len(v), len(t), layers))
             rims.append(set(loop.tolist()))
     faces = np.vstack(new_f)
     return np.vstack(new_v), faces, outer_loops(faces, n)
