@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _holes_kernels as _hk
 from ._hole_close import _chords_avoiding, _edge_keys, _edge_parts, _EdgeSet, _fits
 from ._hole_find import Hole
 from ._hole_layers import fill_layers
@@ -36,25 +37,16 @@ _B = np.int64(1) << np.int64(31)  # half-edge key base: a * 2**31 + b
 def _open_cycles(half: np.ndarray) -> list[np.ndarray] | None:
     """Cycles of the half-edges whose reverse is not among ``half``, in their direction.
 
-    None when they do not close into simple cycles (a vertex left more than once: a
-    pinch, or a fill running a rim edge the mesh's way).
+    Walked by :func:`~asrbf_mesh._holes_kernels.walk_cycles` (as the boundary loops are);
+    None when they do not all close into simple cycles (a vertex left more than once: a
+    pinch; a walk with no way out: a fill running a rim edge the mesh's way).
     """
     key = half[:, 0] * _B + half[:, 1]
     open_ = half[~np.isin(key, half[:, 1] * _B + half[:, 0])]
     if len(np.unique(open_[:, 0])) < len(open_):
         return None
-    nxt = dict(zip(open_[:, 0].tolist(), open_[:, 1].tolist(), strict=True))
-    cycles = []
-    while nxt:
-        start = next(iter(nxt))
-        cycle, v = [start], nxt.pop(start)
-        while v != start:
-            if v not in nxt:
-                return None
-            cycle.append(v)
-            v = nxt.pop(v)
-        cycles.append(np.array(cycle, dtype=np.int64))
-    return cycles
+    cycles = _hk.walk_cycles(open_[np.lexsort((open_[:, 1], open_[:, 0]))])
+    return cycles if sum(len(c) for c in cycles) == len(open_) else None
 
 
 def _scan_near(ctx: Ctx) -> _Near:
