@@ -210,6 +210,40 @@ def _edge_parts(tris: np.ndarray) -> np.ndarray:
     return connected_components(graph, directed=False)[1][:t]
 
 
+def _agree_with_scan(tris: np.ndarray, rim_keys: np.ndarray, inner_keys: np.ndarray
+                     ) -> tuple[np.ndarray, int]:
+    """Orient a patch the scan's way; drop the triangles that cannot join it consistently.
+
+    A patch is triangulated counter-clockwise in the view plane; where the scan folds over
+    itself its rim runs clockwise there (a back layer), and a patch joined to it that way
+    gives a rim edge two faces in one direction (an inconsistently oriented mesh: bun090,
+    punched with seeds 1 and 2). Each edge-connected part of the patch is flipped when
+    more of its edges run along a rim edge (``rim_keys``: the scan's boundary half-edges
+    ``a * 2**31 + b``, sorted) the scan's way than against it; then a triangle that still
+    runs a rim edge the scan's way, or lies on an edge two scan faces share
+    (``inner_keys``, undirected keys, sorted), is dropped. Returns the triangles and how
+    many were dropped.
+    """
+    if len(tris) == 0:
+        return tris, 0
+    he = np.stack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]], axis=1).astype(np.int64)
+    same = _in_sorted(he[..., 0] * _KEY + he[..., 1], rim_keys).sum(axis=1)
+    und = np.sort(he, axis=2)
+    third = _in_sorted(und[..., 0] * _KEY + und[..., 1], inner_keys).any(axis=1)
+    if not same.any() and not third.any():
+        return tris, 0
+    out = tris.copy()
+    if same.any():
+        against = _in_sorted(he[..., 1] * _KEY + he[..., 0], rim_keys).sum(axis=1)
+        part = _edge_parts(tris)
+        flip = (np.bincount(part, weights=same) > np.bincount(part, weights=against))[part]
+        out[flip] = out[flip][:, [0, 2, 1]]
+        fwd = out[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2).astype(np.int64)
+        same = _in_sorted(fwd[..., 0] * _KEY + fwd[..., 1], rim_keys).sum(axis=1)
+    bad = (same > 0) | third
+    return out[~bad], int(bad.sum())
+
+
 class _Parts:
     """The parts of a mesh joined across edges, and how much border each has.
 

@@ -23,16 +23,20 @@ from __future__ import annotations
 import numpy as np
 
 from . import _holes_kernels as _hk
-from ._hole_close import _chords_avoiding, _edge_keys, _edge_parts, _EdgeSet, _fits
+from ._hole_close import (
+    _KEY,
+    _agree_with_scan,
+    _chords_avoiding,
+    _edge_keys,
+    _EdgeSet,
+    _fits,
+)
 from ._hole_find import Hole
 from ._hole_layers import fill_layers
 from ._hole_patch import Ctx, Patch
 from ._hole_refill import _half_edges, _Near
 
 __all__ = ["close_wall", "fill_across_wall"]
-
-_B = np.int64(1) << np.int64(31)  # half-edge key base: a * 2**31 + b
-
 
 def _open_cycles(half: np.ndarray) -> list[np.ndarray] | None:
     """Cycles of the half-edges whose reverse is not among ``half``, in their direction.
@@ -41,8 +45,8 @@ def _open_cycles(half: np.ndarray) -> list[np.ndarray] | None:
     None when they do not all close into simple cycles (a vertex left more than once: a
     pinch; a walk with no way out: a fill running a rim edge the mesh's way).
     """
-    key = half[:, 0] * _B + half[:, 1]
-    open_ = half[~np.isin(key, half[:, 1] * _B + half[:, 0])]
+    key = half[:, 0] * _KEY + half[:, 1]
+    open_ = half[~np.isin(key, half[:, 1] * _KEY + half[:, 0])]
     if len(np.unique(open_[:, 0])) < len(open_):
         return None
     cycles = _hk.walk_cycles(open_[np.lexsort((open_[:, 1], open_[:, 0]))])
@@ -69,17 +73,13 @@ def _close_between(rim: np.ndarray, tris: np.ndarray, points: np.ndarray,
 
     ``rim``: the hole's rim as (E, 2) half-edges in their faces' direction; ``tris``: the
     fill (ids into ``points``, the rim's and the fill's vertices); ``known``: the edges
-    the mesh has. Returns the fill and the walls' triangles, or None.
+    the mesh has. Returns the fill and the walls' triangles, or None. Each part of the
+    fill is turned as a view-plane patch is (:func:`~asrbf_mesh._hole_close._agree_with_scan`).
     """
-    rim_key = rim[:, 0] * _B + rim[:, 1]
-    half = _half_edges(tris)
-    part = np.tile(_edge_parts(tris), 3)
-    k = int(part.max()) + 1
-    same = np.bincount(part, np.isin(half[:, 0] * _B + half[:, 1], rim_key), k)
-    against = np.bincount(part, np.isin(half[:, 1] * _B + half[:, 0], rim_key), k)
-    flip = (same > against)[part[:len(tris)]]
-    tris = tris.copy()
-    tris[flip] = tris[flip][:, [0, 2, 1]]
+    tris, wrong = _agree_with_scan(tris, np.sort(rim[:, 0] * _KEY + rim[:, 1]),
+                                   np.zeros(0, np.int64))
+    if wrong:  # a part that runs rim edges both ways
+        return None
     cycles = _open_cycles(np.vstack([rim, _half_edges(tris)]))
     if cycles is None:
         return None

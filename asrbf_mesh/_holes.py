@@ -55,6 +55,7 @@ from ._forked import map_forked
 from ._frame import sampling_spacing
 from ._hole_close import (
     _KEY,
+    _agree_with_scan,
     _edge_keys,
     _edge_parts,
     _EdgeSet,
@@ -381,40 +382,6 @@ def _close_loops(vertices: np.ndarray, faces: np.ndarray, infos: list[HoleInfo],
     return np.vstack(new_v), faces, outer_loops(faces, n)
 
 
-def _agree_with_scan(tris: np.ndarray, rim_keys: np.ndarray, inner_keys: np.ndarray
-                     ) -> tuple[np.ndarray, int]:
-    """Orient a patch the scan's way; drop the triangles that cannot join it consistently.
-
-    A patch is triangulated counter-clockwise in the view plane; where the scan folds over
-    itself its rim runs clockwise there (a back layer), and a patch joined to it that way
-    gives a rim edge two faces in one direction (an inconsistently oriented mesh: bun090,
-    punched with seeds 1 and 2). Each edge-connected part of the patch is flipped when
-    more of its edges run along a rim edge (``rim_keys``: the scan's boundary half-edges
-    ``a * 2**31 + b``, sorted) the scan's way than against it; then a triangle that still
-    runs a rim edge the scan's way, or lies on an edge two scan faces share
-    (``inner_keys``, undirected keys, sorted), is dropped. Returns the triangles and how
-    many were dropped.
-    """
-    if len(tris) == 0:
-        return tris, 0
-    he = np.stack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]], axis=1).astype(np.int64)
-    same = _in_sorted(he[..., 0] * _KEY + he[..., 1], rim_keys).sum(axis=1)
-    und = np.sort(he, axis=2)
-    third = _in_sorted(und[..., 0] * _KEY + und[..., 1], inner_keys).any(axis=1)
-    if not same.any() and not third.any():
-        return tris, 0
-    out = tris.copy()
-    if same.any():
-        against = _in_sorted(he[..., 1] * _KEY + he[..., 0], rim_keys).sum(axis=1)
-        part = _edge_parts(tris)
-        flip = (np.bincount(part, weights=same) > np.bincount(part, weights=against))[part]
-        out[flip] = out[flip][:, [0, 2, 1]]
-        fwd = out[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2).astype(np.int64)
-        same = _in_sorted(fwd[..., 0] * _KEY + fwd[..., 1], rim_keys).sum(axis=1)
-    bad = (same > 0) | third
-    return out[~bad], int(bad.sum())
-
-
 #: :func:`_leave_out_crossings`: a loop's fill that crosses the scan is a wall between two
 #: layers, left out whole, when its triangles face the view by less than this (|cos| of
 #: the angle between normal and view, area-weighted; the view-plane fill's own limit for
@@ -694,7 +661,8 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         inner_keys = scan_keys[scan_uses >= 2]  # a patch's triangle on one: a third face
         holes, _, fp = found.result()
     ctx = Ctx(xy, depth, net, faces, *trees, spacing, ccw, fp.label_at, blend, lowpass_rel,
-              rim_edges, piece=net.piece_at(xy) if net.n_pieces > 1 else None)
+              rim_edges, piece=net.piece_at(xy) if net.n_pieces > 1 else None,
+              cache={"edges": scan_keys})
 
     new_pts: list[np.ndarray] = []
     new_tris: list[np.ndarray] = []
