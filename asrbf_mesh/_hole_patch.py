@@ -290,6 +290,15 @@ _CUBIC = 0.5
 # The quintic everywhere: models 68.0 %, dev 71.4 %, seeds 10-19 58.3 %; chosen per hole by
 # how each spline fitted to the ring's outer half predicts its inner half: models 70.1 %,
 # seeds 10-19 64.2 %; triharmonic (r^4 log r) kernels did less (65.3 % at best on models).
+# Measured again with the rim's own ring (2026-12-01; model views / bunny views / dev seeds
+# 0-9 / seeds 10-19, below Poisson on): as now 71.4 / 70.9 / 82.8 / 73.8 %; a quarter of
+# the quintic mixed into every other ring's spline 74.8 / 72.1 / 79.7 / 69.0 % (a half:
+# models 68.7 %, views 70.6 %); _CURVED 3: 72.1 / 71.3 % (models, views). Choosing per hole
+# the better of the two (an oracle) would give 79.6 / 76.2 / 84.4 / 74.3 %, but neither the
+# quadratic's misfit against the noise, the noise, the curvature, nor the ring's size told
+# where the quintic does better: their medians over the holes it helps and over those it
+# hurts differ by a few percent, in opposite directions on the model views and the dev
+# scans. _FILL_REL 0.12 and 0.25: models 71.4 and 66.7 %, views 69.4 % with each.
 _CURVED = 2.0
 _CURVED_MIN = 40
 _MIN_NZ = 0.15
@@ -501,6 +510,10 @@ def _sides(ctx: Ctx, rim: np.ndarray, seg: np.ndarray, ring: np.ndarray,
 #: a range grid's triangles across an occlusion join its layers. With edges of any
 #: length, the punch protocol's dev scans (seeds 0-19) changed 16 holes' errors instead
 #: of 28, and bun045 seed 1's worst hole stayed at 0.425 % RMS (0.162 % with the limit).
+#: Limits of 4 and 16 spacings (2026-12-01, punch protocol, below Poisson on / pooled RMS):
+#: dev seeds 0-9 82.8 % / 0.1423 and 82.8 % / 0.1421 (8: 82.8 % / 0.1420), seeds 10-19
+#: 73.3 % / 0.1694 and 73.8 % / 0.1694 (8: 73.8 % / 0.1694); the bunny and model views
+#: the same figures with each.
 RING_EDGE = 8.0
 
 
@@ -508,9 +521,9 @@ def own_ring(ctx: Ctx, ring: np.ndarray, rim: np.ndarray) -> np.ndarray:
     """Return the points of ``ring`` on the rim's own surface, joined to a rim vertex.
 
     ``ring`` holds the scan points near the rim in the view plane, whatever their depth:
-    where a sheet is seen in front of another (an ear over the head behind it, a bone's
-    condyle over its shaft), that takes points of the other layer too, and the fill's
-    spline through both bends towards it. Kept: the points joined to a rim vertex by
+    where a sheet is seen in front of another (bun090's ear over the head behind it: its
+    ring held points of the head 0.015 deeper), that takes points of the other layer too,
+    and the fill's spline through both bends towards it. Kept: the points joined to a rim vertex by
     scan edges between points of ``ring`` and the rim, each at most :data:`RING_EDGE`
     spacings long (the triangles' vertex lists, one table per scan, cached); the whole
     ring when that keeps fewer than half of it.
