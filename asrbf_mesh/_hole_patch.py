@@ -294,11 +294,14 @@ _CUBIC = 0.5
 # 0-9 / seeds 10-19, below Poisson on): as now 71.4 / 70.9 / 82.8 / 73.8 %; a quarter of
 # the quintic mixed into every other ring's spline 74.8 / 72.1 / 79.7 / 69.0 % (a half:
 # models 68.7 %, views 70.6 %); _CURVED 3: 72.1 / 71.3 % (models, views). Choosing per hole
-# the better of the two (an oracle) would give 79.6 / 76.2 / 84.4 / 74.3 %, but neither the
-# quadratic's misfit against the noise, the noise, the curvature, nor the ring's size told
-# where the quintic does better: their medians over the holes it helps and over those it
-# hurts differ by a few percent, in opposite directions on the model views and the dev
-# scans. _FILL_REL 0.12 and 0.25: models 71.4 and 66.7 %, views 69.4 % with each.
+# the better of the two (an oracle) would give 79.6 / 76.2 / 84.4 / 74.3 %, but no feature
+# of the ring tried told where the quintic does better: the quadratic's largest
+# coefficient, median over the holes it helps against those it hurts, 0.35 against 0.59
+# on the model views and 0.44 against 0.32 on seeds 10-19; its misfit under T x the noise
+# (on the holes matched to their ring; as now 72.9 / 70.6 / 82.0 / 74.0 %): T 3 73.6 /
+# 71.0 / 82.0 / 73.5 %, T 4 75.0 / 70.2 / 82.0 / 72.4 %, T 6 74.3 / 69.0 / 82.5 / 71.3 %;
+# the noise, the plane's misfit and the ring's size no better.
+# _FILL_REL 0.12 and 0.25: models 71.4 and 66.7 %, views 69.4 % with each.
 _CURVED = 2.0
 _CURVED_MIN = 40
 _MIN_NZ = 0.15
