@@ -311,21 +311,20 @@ _CUBIC = 0.5
 # rim 0.342 -> 0.147 %, but three domes of the bone views 0.06-0.12 -> 0.55-0.59 %), views
 # 68.7 %; the better of it and the spline per hole (an oracle) 73.5 % on the models.
 # Where the fill loses to Poisson it is mostly offset, not rough (`scripts/hole_offsets.py`;
-# bunny and model views seeds 0-9, dev scans seeds 0-19): on the holes it loses,
-# its mean signed distance (truth to fill, along the normal) is 0.55 / 0.63 / 0.57 of
-# its RMS (bunny views / model views / dev seeds 0-19; Poisson's 0.30 / 0.38 / 0.34 on
-# the same holes), the fill in front of the truth (towards the scanner) on 73 / 67 / 68 %
-# of them; with each hole's own mean offset taken out it would be below Poisson on 84 /
-# 82 / 87 % of the holes. The offset is not the spline's bulge over a harmonic membrane
-# through the rim (a one-off harness, not in scripts/: correlation -0.08 / -0.15 over the
-# holes of the bunny / model views;
-# shrinking the fill a fifth of the way to it, judged by the holes' mean offsets: 72.5 %
-# of the bunny views' holes, 55.1 % of the models'), and the mean of the fill and
-# Poisson's own surface (per truth point, the two signed distances) would be below
-# Poisson on 80 / 79 % of the bunny / model views' holes. Nor is it the smoothing spline's
-# own offset at the rim: the fill shifted by the spline's mean residual over the ring's
-# innermost 30 % (by distance to the hole's centre): 71.4 % (pooled 0.0885 -> 0.0878) /
-# 71.3 % (0.1609 -> 0.1611); its innermost 15 %: models 71.4 % (0.0870).
+# bunny and model views seeds 0-9, dev scans seeds 0-19): over the holes it loses, the
+# median of its truth points' mean signed distance to the fill over their RMS, |mean| /
+# RMS, is 0.55 / 0.63 / 0.57 (bunny views / model views / dev scans; Poisson's 0.30 / 0.38 /
+# 0.34 on the same holes), the fill in front of the truth (towards the scanner) on 73 / 67
+# / 68 % of them; with each hole's own mean offset taken out it would be below Poisson on
+# 84 / 82 / 87 % of the holes, and the surface halfway between it and Poisson's (per truth
+# point, the mean of the two signed distances) on 80 / 79 / 86 %. The offset is not the
+# spline's bulge over a harmonic membrane through the rim (a one-off harness, not in
+# scripts/: correlation -0.08 / -0.15 over the holes of the bunny / model views;
+# shrinking the fill a fifth of the way to it, judged by the holes' mean offsets, 72.5 %
+# of the bunny views' holes, 55.1 % of the models'), nor the smoothing spline's own offset
+# at the rim: the fill shifted by the spline's mean residual over the ring's innermost
+# 30 % (by distance to the hole's centre): 71.4 % (pooled 0.0885 -> 0.0878) / 71.3 %
+# (0.1609 -> 0.1611); its innermost 15 %: models 71.4 % (0.0870).
 _CURVED = 2.0
 _CURVED_MIN = 40
 _MIN_NZ = 0.15
