@@ -26,6 +26,8 @@ With ``--mesh PATH ...`` other closed models are scanned the same way instead (t
 each, ``<stem>0.ply`` ... ``<stem>2.ply``; loop-subdivided, centred, 1.2 times bun000's
 extent, at its spacing and noise): pymeshlab ships a few (``cow.obj``, ``bone.ply``,
 ``airplane.obj`` in its ``tests/sample_meshes``), scans of shapes the bunny has not.
+``--view-set second`` scans from a second set of angles (the bunny's ``nv060`` ...
+``nv_yx``, a model's ``<stem>a`` ... ``<stem>c``), a check on views no setting was tuned on.
 
 Each view is written as ``<out>/<name>.ply`` (binary, the scan's own frame). These scans
 are benchmark inputs the project's tuning never saw: ``bench_holes_protocol.py --scans``
@@ -62,6 +64,15 @@ VIEWS = {
 
 #: The views of another model (``--mesh``): name suffix -> (rotation axis, degrees).
 MESH_VIEWS = {"0": ("y", 30.0), "1": ("x", 50.0), "2": ("yx", (200.0, -25.0))}
+
+#: ``--view-set second``: angles none of the views above has, for a check on scans that
+#: no tuning saw (the bunny's seven, three per model named ``<stem>a`` ... ``<stem>c``).
+VIEWS_SECOND = {
+    "nv060": ("y", 60.0), "nv100": ("y", 100.0), "nv160": ("y", 160.0),
+    "nv200": ("y", 200.0), "nv_top70": ("x", 70.0), "nv_below": ("x", -55.0),
+    "nv_yx": ("yx", (250.0, 25.0)),
+}
+MESH_VIEWS_SECOND = {"a": ("y", 120.0), "b": ("x", -60.0), "c": ("yx", (80.0, 40.0))}
 
 
 def model_surface(path: Path, extent: float, subdivide: int = 3) -> am.Mesh:
@@ -249,7 +260,11 @@ def main(argv: list[str] | None = None) -> int:
                          "sample meshes: cow.obj, bone.ply, airplane.obj), three views each "
                          "(<stem>0-2.ply), loop-subdivided, 1.2x bun000's extent, at its "
                          "spacing and noise")
+    ap.add_argument("--view-set", choices=("first", "second"), default="first",
+                    help="the views (default) or a second set at other angles "
+                         "(nv060 ... nv_yx; <stem>a-c with --mesh)")
     args = ap.parse_args(argv)
+    second = args.view_set == "second"
     if args.bunny is None or not (Path(args.bunny) / "bun.conf").exists():
         ap.exit(2, "needs the bunny scans: --bunny DIR or $ASRBF_BUNNY_DIR (with bun.conf)\n")
     folder = Path(args.bunny)
@@ -261,10 +276,11 @@ def main(argv: list[str] | None = None) -> int:
     noise = noise_level(ref) if args.noise is None else args.noise
     if args.mesh:
         extent = 1.2 * float(np.ptp(used, axis=0).max())
-        jobs = [(model_surface(m, extent), {m.stem + k: v for k, v in MESH_VIEWS.items()})
+        mesh_views = MESH_VIEWS_SECOND if second else MESH_VIEWS
+        jobs = [(model_surface(m, extent), {m.stem + k: v for k, v in mesh_views.items()})
                 for m in args.mesh]
     else:
-        jobs = [(merged_surface(folder), VIEWS)]
+        jobs = [(merged_surface(folder), VIEWS_SECOND if second else VIEWS)]
     print(f"spacing {spacing:.3g}, noise {noise:.3g} (scan units)")
     args.out.mkdir(parents=True, exist_ok=True)
     for surface, views in jobs:

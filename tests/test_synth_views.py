@@ -101,3 +101,12 @@ def test_another_model_becomes_a_smooth_surface_of_the_extent_asked() -> None:
     # subdivided, the cube rounds off: its vertices no longer all sit on its faces
     half = np.abs(s.vertices).max(axis=1)
     assert half.min() < 0.9 * half.max()
+
+
+def test_the_second_view_set_repeats_no_view_or_name_of_the_first() -> None:
+    for first, second in ((sv.VIEWS, sv.VIEWS_SECOND), (sv.MESH_VIEWS, sv.MESH_VIEWS_SECOND)):
+        assert not set(first.values()) & set(second.values())
+        assert not set(first) & set(second)
+        for axis, deg in second.values():
+            R = sv.view_rotation(axis, deg)
+            assert np.allclose(R @ R.T, np.eye(3)) and np.isclose(np.linalg.det(R), 1.0)
