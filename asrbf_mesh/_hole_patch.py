@@ -335,19 +335,18 @@ _CUBIC = 0.5
 # voxel twice as large, 39.5 % / 0.1415). Averaging with a second estimator lowers the
 # pooled RMS; the share it gains at depth 9 is its closeness to the surface it is judged by.
 # Where a ring's surface turns steeply away from the ring's plane (nv060 seed 2 of a second
-# set of views, `synth_views.py --view-set second`: a hole of 11 % of the diagonal whose ring
-# rolls over on one side, filled with a dome a third of its size high, 1.007 % RMS), the
-# ring's points whose scan normal meets the plane's normal at a cosine under 0.26 left out
-# of the plane and the splines (unless half the ring; 2026-12-01, twenty-seventh session):
-# that hole 0.092 %, bun000 seed 13 0.609 -> 0.454 %, airplane2's two crest holes 0.30 /
-# 0.34 -> 0.05 / 0.11 %, but steep sheets of the same surface went with the folds: bun090
-# seeds 0 and 5 0.264 / 0.409 -> 0.507 / 0.530 %, syn_chin seed 9 0.386 -> 0.566 %; model
-# views 72.8 % (pooled 0.0821), bunny views 70.6 % (0.1639), dev seeds 0-9 81.8 % (0.1449,
-# two holes above 0.5 %), seeds 10-19 74.9 % (0.1644, one). A cosine of 0.1: nv060's hole
-# 0.156 %; of 0: 0.976 % (its points turn steeply, not over). Only the low-facing points
-# with a point of the rest within 6 spacings in the plane 3 spacings higher or lower (a
-# fold, not a steep sheet): the same holes changed, models 72.1 % (0.0833), views 70.6 %
-# (steep sheets have such neighbours too).
+# set of views, `synth_views.py --view-set second`: a hole of 11 % of the diagonal, filled
+# with a dome a third of its size high, 1.007 % RMS), the ring's points whose scan normal
+# meets the plane's normal at a cosine under 0.26 left out of the plane and the splines
+# (unless half the ring; 2026-12-01, twenty-seventh session): that hole 0.092 %, bun000
+# seed 13 0.609 -> 0.454 %, two of airplane2's holes 0.30 / 0.34 -> 0.05 / 0.11 %, but
+# other holes rose: bun090 seeds 0 and 5 0.264 / 0.409 -> 0.507 / 0.530 %, syn_chin seed 9
+# 0.386 -> 0.566 %; model views 72.8 % (pooled 0.0821), bunny views 70.6 % (0.1639), dev
+# seeds 0-9 81.8 % (0.1449, two holes above 0.5 %), seeds 10-19 74.9 % (0.1644, one). A
+# cosine of 0.1: nv060's hole 0.156 %; of 0: 0.976 % (its points turn steeply, few over).
+# Only the low-facing points with a point of the rest within 6 spacings in the plane 3
+# spacings higher or lower (a fold, not a steep sheet): the same holes changed, models
+# 72.1 % (0.0833), views 70.6 % (steep sheets have such neighbours too).
 _CURVED = 2.0
 _CURVED_MIN = 40
 _MIN_NZ = 0.15
