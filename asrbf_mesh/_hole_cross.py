@@ -160,10 +160,19 @@ def _crossing(tri, faces, lo, hi, first, ij, ny, keys, items, contact, crossed, 
                             or lo[b, 1] > hi[a, 1] or lo[a, 2] > hi[b, 2]
                             or lo[b, 2] > hi[a, 2]):
                         continue
-                    if _cross(tri[a], tri[b], contact) and not (
+                    if _cross(tri[a], tri[b], contact, not _shares_corner(tri[a], tri[b])) and not (
                             _same_corners(tri[a], tri[b]) and not _same_corners(faces[a],
                                                                                 faces[b])):
                         crossed[a] = True  # (copies of a crack's corners: the same surface)
+
+
+@njit(cache=True, nogil=True)
+def _shares_corner(p, q):  # a corner of p where one of q's is: (3, 3) corners each
+    for i in range(3):
+        for j in range(3):
+            if p[i, 0] == q[j, 0] and p[i, 1] == q[j, 1] and p[i, 2] == q[j, 2]:
+                return True
+    return False
 
 
 @njit(cache=True, nogil=True)
@@ -182,10 +191,14 @@ def triangles_cross(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Whether each pair of triangles (two (M, 3, 3) arrays) overlaps in more than contact.
 
     Separating axes: the two normals, the nine cross products of an edge of each and,
-    for a pair in one plane, each edge crossed with its normal. The pair crosses when on
-    every axis each reaches into the other by more than :data:`CONTACT` times its
-    longest edge (triangles that only share a corner or an edge do not, on one of
-    them), an axis on which both are one point excepted (the plane they share).
+    for a pair in one plane, each edge crossed with its normal. A pair with a corner in
+    common crosses when on every axis each reaches into the other by more than
+    :data:`CONTACT` times its longest edge (triangles that only share a corner or an
+    edge do not, on one of them), an axis on which both are one point excepted (the
+    plane they share). A pair without one crosses when it touches, within that
+    distance, on every axis: a corner of one on the other is a surface touching itself
+    (a fill's corner on a wall's triangle seen edge-on, which pymeshlab's selection
+    finds).
     """
     p = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3, 3)
     q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3, 3)
@@ -198,12 +211,12 @@ def triangles_cross(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 def _cross_all(p, q, contact):
     out = np.empty(p.shape[0], np.bool_)
     for m in range(p.shape[0]):
-        out[m] = _cross(p[m], q[m], contact)
+        out[m] = _cross(p[m], q[m], contact, not _shares_corner(p[m], q[m]))
     return out
 
 
 @njit(cache=True, nogil=True)
-def _cross(p0, q0, contact):
+def _cross(p0, q0, contact, touch):
     # vectors as tuples (no arrays made per pair), moved to the pair's middle: the
     # arithmetic of a pair far from the origin
     m = ((p0[0, 0] + p0[1, 0] + p0[2, 0] + q0[0, 0] + q0[1, 0] + q0[2, 0]) / 6.0,
@@ -217,6 +230,7 @@ def _cross(p0, q0, contact):
     for v in range(3):
         scale = max(scale, np.sqrt(_dot(ep[v], ep[v])), np.sqrt(_dot(eq[v], eq[v])))
     tol = contact * scale
+    gap = -tol if touch else tol  # parted on an axis when farther apart than this
     n_p = _crossv(ep[0], ep[1])
     n_q = _crossv(eq[0], eq[1])
     tested = 0
@@ -242,8 +256,8 @@ def _cross(p0, q0, contact):
         if hi_p - lo_p <= tol and hi_q - lo_q <= tol:  # both one point: the plane they share
             if abs(lo_p - lo_q) > tol:
                 return False
-        elif min(hi_p - lo_q, hi_q - lo_p) <= tol:  # a flat triangle's normal: a triangle
-            return False  # through it reaches in from both sides, one touching it does not
+        elif min(hi_p - lo_q, hi_q - lo_p) <= gap:  # a flat triangle's normal: one
+            return False  # through it reaches in from both sides, one on its corner does not
     return tested > 0  # two points, or segments on one line: nothing to cross
 
 

@@ -76,7 +76,8 @@ def _case(args: tuple[str, int, bool, str, bool]) -> dict:
     out = {"name": name, "seed": seed, "traced": traced, "open": _open_holes(p, res),
            "n": np.bincount(p.hole, minlength=len(p.enclosed))[p.enclosed],
            "rms": score_holes(p, res.mesh)[0][p.enclosed], "seconds": secs,
-           "crossing": _crossing(res.mesh, len(p.scan.faces))}
+           "crossing": _crossing(res.mesh, len(p.scan.faces)),
+           "far": _past_reach(res, p.scan.points)}
     methods = {}
     if poisson:
         from asrbf_mesh.evaluate import _meshlab
@@ -102,6 +103,14 @@ def _crossing(mesh, n_scan_faces: int) -> int:
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces))
     ms.compute_selection_by_self_intersections_per_face()
     return int(np.count_nonzero(ms.current_mesh().face_selection_array()[n_scan_faces:]))
+
+
+def _past_reach(res, points: np.ndarray) -> int:
+    """Fill vertices past the scan's depths by more than the widest hole filled is wide."""
+    new = res.mesh.vertices[len(points):, 2]
+    widest = max((h.size_abs for h in res.holes if h.filled), default=0.0)
+    z = points[:, 2]
+    return int(np.count_nonzero((new < z.min() - widest) | (new > z.max() + widest)))
 
 
 def _open_holes(p, res) -> list[str | None]:
@@ -146,7 +155,8 @@ def _other_case(args: tuple[str, int, str]) -> dict:
     ``synth:<kind>`` (:func:`asrbf_mesh.evaluate._synthetic_holes.synthetic_holes`).
     Returns the holes found and filled, the reasons of those left open and the checks
     that failed: vertices finite, the scan's own points kept as they are, no triangle with
-    a vertex twice, no edge with more triangles than the scan's own edges have.
+    a vertex twice, no edge with more triangles than the scan's own edges have, no fill
+    vertex past the scan's depths by more than the widest hole filled is wide.
     """
     import warnings
 
@@ -170,6 +180,7 @@ def _other_case(args: tuple[str, int, str]) -> dict:
                                                | (out_f[:, 1] == out_f[:, 2])
                                                | (out_f[:, 0] == out_f[:, 2])))),
         ("edges", most_faces_per_edge(out_f) <= max(2, most_faces_per_edge(scan.faces))),
+        ("within reach", _past_reach(res, scan.points) == 0),
     ) if not ok]
     return {"name": name, "seed": seed, "found": res.holes_found, "filled": res.holes_filled,
             "open": [h.reason or "not filled" for h in res.holes if not h.filled],
@@ -274,6 +285,10 @@ def main(argv: list[str] | None = None) -> int:
                         f"(pymeshlab's self-intersection selection): "
                         f"{sum(c > 0 for c in crossing)} of {len(done)} ({sum(crossing):,} "
                         "triangles)")
+        far = [r.get("far", 0) for r in done]
+        lines.insert(2, f"- outputs with fill vertices past the scan's depths by more than "
+                        f"the widest hole filled is wide: {sum(c > 0 for c in far)} of "
+                        f"{len(done)} ({sum(far):,} vertices)")
     for name, seed, why in (bad + opened)[:20]:
         lines.append(f"  - {label(name)} seed {seed}: {why}")
     suffix = "-views" if args.scans and not set(args.scans) & {"face", *BUNNIES} else ""
@@ -331,8 +346,9 @@ def main(argv: list[str] | None = None) -> int:
                 "is, default options) and synthetic holed scans "
                 "(`asrbf_mesh.evaluate._synthetic_holes`, default options); 'checks failed': "
                 "cases whose output had a non-finite vertex, a scan point moved, a triangle "
-                "with a vertex twice or an edge with more triangles than the scan's own "
-                "edges.\n\n" + table(["case", "runs", "holes found", "filled", "left open",
+                "with a vertex twice, an edge with more triangles than the scan's own "
+                "edges or a fill vertex past the scan's depths by more than the widest hole "
+                "filled is wide.\n\n" + table(["case", "runs", "holes found", "filled", "left open",
                                       "why left open", "checks failed"], rows) + "\n")
         print(body)
         write_section("holes-fuzz" + suffix, body)

@@ -55,3 +55,33 @@ def test_a_ring_mostly_elsewhere_is_kept_whole() -> None:
     rim = np.array([19 * 20 + 0, 19 * 20 + 1])  # a corner of the plane
     ring = np.r_[np.arange(400, 480), 18 * 20 + np.arange(3)]
     np.testing.assert_array_equal(own_ring(ctx, ring, rim), ring)
+
+
+def test_a_fill_vertex_far_past_its_ring_takes_the_membrane_of_the_rest() -> None:
+    """A new depth more than a hole size past the ring's depths (a ray that met a steep
+    plane's spline far off) is replaced within them; the others are kept bit for bit."""
+    from asrbf_mesh._hole_patch import _REACH, _depth_bounds, _within_reach
+
+    x, y = np.meshgrid(np.arange(6.0), np.arange(6.0))
+    depth = 0.1 * x.ravel()  # a tilted plane, depths 0 ... 0.5
+    ctx = SimpleNamespace(depth=depth)
+    rim = np.array([7, 8, 9, 10, 16, 22, 28, 27, 26, 25, 19, 13])  # around (2.5, 2.5)
+    ring = np.arange(36)
+    lo, hi = _depth_bounds(ctx, ring, 2.0)
+    assert (lo, hi) == (-_REACH * 2.0, 0.5 + _REACH * 2.0)
+    # four new vertices inside, the rim's 12 first: a fan of triangles over a 2 x 2 grid
+    tris = np.array([[0, 1, 12], [1, 2, 13], [2, 3, 13], [3, 4, 13], [4, 5, 15],
+                     [5, 6, 15], [6, 7, 15], [7, 8, 14], [8, 9, 14], [9, 10, 14],
+                     [10, 11, 12], [11, 0, 12], [1, 13, 12], [12, 13, 15], [12, 15, 14],
+                     [4, 15, 13], [7, 14, 15], [10, 12, 14]])
+    sane = np.array([0.15, 0.25, 0.2, 0.3])
+    assert _within_reach(ctx, ring, 2.0, tris, rim, sane) is sane  # nothing to do
+    wild = sane.copy()
+    wild[1] = -40.0  # 20 hole sizes off
+    got = _within_reach(ctx, ring, 2.0, tris, rim, wild)
+    assert np.array_equal(np.delete(got, 1), np.delete(sane, 1))
+    assert depth.min() <= got[1] <= depth.max()
+    wild[:] = np.nan  # none left to lean on: the rim's membrane
+    got = _within_reach(ctx, ring, 2.0, tris, rim, wild)
+    assert np.isfinite(got).all() and (got >= depth[rim].min()).all() \
+        and (got <= depth[rim].max()).all()

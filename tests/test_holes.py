@@ -610,8 +610,9 @@ def test_crossing_of_a_few_faces_agrees_with_brute_force() -> None:
 
 
 def test_triangles_cross_agrees_with_edge_through_triangle_tests() -> None:
-    """Random pairs as an edge-through-triangle test says; contact is no crossing."""
-    from asrbf_mesh._hole_cross import triangles_cross
+    """Random pairs as an edge-through-triangle test says; contact at a common corner or
+    edge is no crossing, a corner on a triangle with no corner in common is."""
+    from asrbf_mesh._hole_cross import crossing_faces, triangles_cross
 
     def edge_through(a, b, t):  # Moller-Trumbore, segment a-b against triangle t
         e1, e2, d = t[1] - t[0], t[2] - t[0], b - a
@@ -644,6 +645,16 @@ def test_triangles_cross_agrees_with_edge_through_triangle_tests() -> None:
     a = np.array([[35.0, 31.0, 33.5], [35.5, 29.5, 33.55], [36.0, 30.0, 33.6]])
     b = np.array([[35.5, 28.5, 33.55], [36.5, 27.5, 33.65], [37.0, 30.0, 33.7]])
     assert not triangles_cross(a[None], b[None])[0]
+    # a wall seen edge-on (x = y) and a triangle with a corner on it, none in common: the
+    # surface touches itself (pymeshlab's selection finds it); moved off by 1e-6, parted
+    wall = np.array([[0, 0, 0], [2, 2, 0], [1, 1, 2]], dtype=float)
+    on = np.array([[1, 1, 0.5], [2, 0, 0.5], [2, 1, 0.5]])
+    off = on + [1e-6, 0, 0]
+    shared = np.array([[0, 0, 0], [2, 0, 0.5], [2, 1, 0.5]])  # its corner one of the wall's
+    assert triangles_cross(np.repeat(wall[None], 3, 0),
+                           np.stack([on, off, shared])).tolist() == [True, False, False]
+    v = np.vstack([wall, on])
+    assert crossing_faces(v, np.array([[0, 1, 2], [3, 4, 5]]), 1).tolist() == [1]
 
 
 def test_a_hole_punched_into_a_narrow_gap_is_filled_up_to_the_gap() -> None:
