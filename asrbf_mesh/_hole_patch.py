@@ -514,7 +514,7 @@ def close_patch(pts: np.ndarray, rim: np.ndarray, seg: np.ndarray, tris: np.ndar
 #: A fill's depths stay within its ring's depths widened by this many hole sizes (a
 #: hemisphere over the hole reaches half its size). Measured on the punch protocol (dev
 #: scans seeds 0-19, model and bunny views seeds 0-9): 1.0 and 0.5 changed the same 3 of
-#: 758 holes' errors (bun090 seed 0's cliff hole 0.264 -> 0.430 and 0.448 %, its spike
+#: 791 holes' errors (bun090 seed 0's cliff hole 0.264 -> 0.430 and 0.448 %, its spike
 #: had stood along the cliff); outputs with fill vertices 2 % of the diagonal past the
 #: scan's depths 15 of 270 before, 12 and 4 with them.
 _REACH = 0.5

@@ -348,8 +348,9 @@ def main(argv: list[str] | None = None) -> int:
                 "cases whose output had a non-finite vertex, a scan point moved, a triangle "
                 "with a vertex twice, an edge with more triangles than the scan's own "
                 "edges or a fill vertex past the scan's depths by more than the widest hole "
-                "filled is wide.\n\n" + table(["case", "runs", "holes found", "filled", "left open",
-                                      "why left open", "checks failed"], rows) + "\n")
+                "filled is wide.\n\n"
+                + table(["case", "runs", "holes found", "filled", "left open", "why left open",
+                         "checks failed"], rows) + "\n")
         print(body)
         write_section("holes-fuzz" + suffix, body)
         return 1 if crashes else 0

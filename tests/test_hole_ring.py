@@ -58,8 +58,8 @@ def test_a_ring_mostly_elsewhere_is_kept_whole() -> None:
 
 
 def test_a_fill_vertex_far_past_its_ring_takes_the_membrane_of_the_rest() -> None:
-    """A new depth more than a hole size past the ring's depths (a ray that met a steep
-    plane's spline far off) is replaced within them; the others are kept bit for bit."""
+    """A new depth past the ring's depths by more than _REACH hole sizes (a ray that met a
+    steep plane's spline far off) is replaced within them; the others are kept bit for bit."""
     from asrbf_mesh._hole_patch import _REACH, _depth_bounds, _within_reach
 
     x, y = np.meshgrid(np.arange(6.0), np.arange(6.0))
