@@ -106,9 +106,15 @@ def _crossing(mesh, n_scan_faces: int) -> int:
 
 
 def _past_reach(res, points: np.ndarray) -> int:
-    """Fill vertices past the scan's depths by more than the widest hole filled is wide."""
+    """Fill vertices past the scan's depths by more than the widest hole filled is wide.
+
+    Holes partly filled count (vertices added, an edge left open): a synthetic cylinder's
+    hole of 13.7 units (seed 28) left open with 2,075 vertices added, 0.3 past the
+    scan's depths, was counted against a width of 0.
+    """
     new = res.mesh.vertices[len(points):, 2]
-    widest = max((h.size_abs for h in res.holes if h.filled), default=0.0)
+    widest = max((h.size_abs for h in res.holes if h.filled or h.vertices_added),
+                 default=0.0)
     z = points[:, 2]
     return int(np.count_nonzero((new < z.min() - widest) | (new > z.max() + widest)))
 
