@@ -108,7 +108,7 @@ def _crossing(mesh, n_scan_faces: int) -> int:
 def _past_reach(res, points: np.ndarray) -> int:
     """Fill vertices past the scan's depths by more than the widest hole filled is wide.
 
-    Holes partly filled count (vertices added, an edge left open): a synthetic cylinder's
+    Holes filled in part count too (vertices added, an edge left open): a synthetic cylinder's
     hole of 13.7 units (seed 28) left open with 2,075 vertices added, 0.3 past the
     scan's depths, was counted against a width of 0.
     """
@@ -162,7 +162,8 @@ def _other_case(args: tuple[str, int, str]) -> dict:
     Returns the holes found and filled, the reasons of those left open and the checks
     that failed: vertices finite, the scan's own points kept as they are, no triangle with
     a vertex twice, no edge with more triangles than the scan's own edges have, no fill
-    vertex past the scan's depths by more than the widest hole filled is wide.
+    vertex past the scan's depths by more than the widest hole filled (wholly or in
+    part) is wide.
     """
     import warnings
 
@@ -293,8 +294,8 @@ def main(argv: list[str] | None = None) -> int:
                         "triangles)")
         far = [r.get("far", 0) for r in done]
         lines.insert(2, f"- outputs with fill vertices past the scan's depths by more than "
-                        f"the widest hole filled is wide: {sum(c > 0 for c in far)} of "
-                        f"{len(done)} ({sum(far):,} vertices)")
+                        "the widest hole filled (wholly or in part) is wide: "
+                        f"{sum(c > 0 for c in far)} of {len(done)} ({sum(far):,} vertices)")
     for name, seed, why in (bad + opened)[:20]:
         lines.append(f"  - {label(name)} seed {seed}: {why}")
     suffix = "-views" if args.scans and not set(args.scans) & {"face", *BUNNIES} else ""
@@ -354,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
                 "cases whose output had a non-finite vertex, a scan point moved, a triangle "
                 "with a vertex twice, an edge with more triangles than the scan's own "
                 "edges or a fill vertex past the scan's depths by more than the widest hole "
-                "filled is wide.\n\n"
+                "filled (wholly or in part) is wide.\n\n"
                 + table(["case", "runs", "holes found", "filled", "left open", "why left open",
                          "checks failed"], rows) + "\n")
         print(body)
