@@ -24,7 +24,7 @@ import numpy as np
 from ._mesh import Mesh, Scan
 from ._range import DEFAULT_JUMP, RangeGrid, _block_faces
 
-__all__ = ["Lattice", "find_lattice", "lattice_grid", "merge_fill"]
+__all__ = ["Lattice", "find_lattice", "frame_faces", "lattice_grid", "merge_fill"]
 
 #: A vertex is on the lattice when ``x / d`` and ``y / d`` are within this share of a
 #: lattice step of a lattice line (float32 coordinates are good to about 1e-4 of a step).
@@ -32,6 +32,9 @@ _ON_LATTICE = 0.02
 #: Grids of more cells than this (or than this many times the vertices) are not made.
 _MAX_CELLS = 30_000_000
 _MAX_CELLS_PER_POINT = 16
+#: A bare point cloud's lattice steps are measured between this many points, spread over
+#: it, and their 8 nearest (:func:`_near_pairs`).
+_PAIR_SAMPLE = 4096
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,24 @@ class Lattice:
         return 1.0 / self.su, 1.0 / self.sv, -self.u0 / self.su, -self.v0 / self.sv
 
 
+def _near_pairs(t: np.ndarray) -> np.ndarray:
+    """Pairs (i, j) of :data:`_PAIR_SAMPLE` points spread over the cloud and their 8 nearest.
+
+    On a pixel lattice (about square pixels) a point's 8 nearest are its 8 neighbours
+    where the frame has them: 6 of the 8 pairs lie one step apart along each axis, so the
+    median of their differences is one step there, as it is over a frame's edges.
+    """
+    from scipy.spatial import cKDTree
+
+    pick = np.unique(np.linspace(0, len(t) - 1, min(len(t), _PAIR_SAMPLE)).astype(np.int64))
+    with np.errstate(all="ignore"):
+        ok = np.isfinite(t).all(axis=1)
+    if not ok.all():
+        return np.zeros((0, 2), np.int64)
+    _, near = cKDTree(t).query(t[pick], k=9)
+    return np.column_stack([np.repeat(pick, 8), near[:, 1:].ravel()])
+
+
 def _axis(t: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, float, float] | None:
     """Integer lattice coordinates of ``t`` (one per vertex), its origin and step, or None.
 
@@ -67,6 +88,8 @@ def _axis(t: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, float, float] |
     triangulation two edges of three cross a column (or a row), so the median is one
     step; then origin and step by least squares over the rounded coordinates.
     """
+    if len(edges) == 0:
+        return None
     dt = np.abs(t[edges[:, 0]] - t[edges[:, 1]])
     step = float(np.median(dt))
     if not (np.isfinite(step) and step > 0):
@@ -96,18 +119,25 @@ def find_lattice(scan: Scan) -> Lattice | None:
     A frame's mesh: every vertex has depth ``d = |z| > 0`` of one sign, ``x / d`` and
     ``y / d`` on two evenly spaced lattices (each vertex within
     :data:`_ON_LATTICE` of a step of a lattice point, one vertex per point), and every
-    triangle within one 2 x 2 block of lattice points.
+    triangle within one 2 x 2 block of lattice points. A frame's bare point cloud (no
+    triangles: a depth image turned into points by Open3D or PCL, saved as PLY, XYZ or
+    NPY) is found by the same test on its points alone, the lattice's steps measured
+    between near points (:func:`_near_pairs`); :func:`frame_faces` meshes it.
     """
     faces = scan.faces
     p = scan.points
-    if faces is None or len(faces) == 0 or len(p) < 16:
+    if len(p) < 16:
         return None
     z = p[:, 2]
     sign = 1.0 if z[0] > 0 else -1.0
     d = sign * z
     if not np.all(d > 0):
         return None
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    bare = faces is None or len(faces) == 0
+    if bare:
+        edges = _near_pairs(np.column_stack([p[:, 0] / d, p[:, 1] / d]))
+    else:
+        edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     found = []
     # rows run down the image: along -y in OpenGL camera coordinates (z < 0), along +y
     # in OpenCV's (z > 0), so both give the frame as the camera saw it
@@ -123,10 +153,25 @@ def find_lattice(scan: Scan) -> Lattice | None:
         return None
     if np.bincount(rows * shape[1] + cols, minlength=cells).max() > 1:
         return None  # two vertices on one lattice point
+    if bare:
+        return Lattice(rows, cols, shape, u0, su, v0, sv, sign)
     r, c = rows[faces], cols[faces]
     if (r.max(1) - r.min(1)).max() > 1 or (c.max(1) - c.min(1)).max() > 1:
         return None  # a triangle across more than one block
     return Lattice(rows, cols, shape, u0, su, v0, sv, sign)
+
+
+def frame_faces(scan: Scan, lat: Lattice) -> np.ndarray:
+    """Triangles of a frame's bare point cloud on its lattice, as vertex ids of the cloud.
+
+    Those of its depth image (:meth:`RangeGrid.to_scan`: 2 x 2 blocks, depth jumps cut),
+    so the cloud is meshed as the frame it came from.
+    """
+    H, W = lat.shape
+    vid = np.full(H * W, -1, dtype=np.int64)
+    vid[lat.rows * W + lat.cols] = np.arange(len(scan.points))
+    ok = lattice_grid(scan, lat)._edge_ok(DEFAULT_JUMP)
+    return _block_faces(vid.reshape(H, W), ok, scan.points)
 
 
 def lattice_grid(scan: Scan, lat: Lattice) -> RangeGrid:

@@ -238,9 +238,11 @@ def _show_fill_grid(d: dict[str, Any], args: argparse.Namespace) -> None:
     skipped = [h for h in d["holes"] if not h["filled"]]
     if "lattice" in d:
         lat = d["lattice"]
-        print(f"{args.scan}: a depth frame's mesh: its vertices on a {lat['cols']} x "
-              f"{lat['rows']} pixel lattice (fx {lat['fx']:.4g}, fy {lat['fy']:.4g}); "
-              "filled on it as a depth image (--as-mesh: in the view plane)")
+        what, how = ("point cloud", f", meshed on it ({lat['scan_faces']:,} triangles) and "
+                     "filled") if lat.get("points_only") else ("mesh", "; filled on it")
+        print(f"{args.scan}: a depth frame's {what}: its vertices on a {lat['cols']} x "
+              f"{lat['rows']} pixel lattice (fx {lat['fx']:.4g}, fy {lat['fy']:.4g}){how} "
+              "as a depth image (--as-mesh: in the view plane)")
     print(f"{args.scan}: {d['holes_found']} holes found (no-data regions open to the border "
           f"left as they are: {d['border_cells']:,} cells), {d['holes_filled']} filled, "
           f"{len(skipped)} skipped")
@@ -480,9 +482,9 @@ def _fill_holes_options(h: argparse.ArgumentParser, full: bool = True) -> None:
     h.add_argument("--mask", help="gridded input: also write a mask image of the filled "
                                   "cells (uint8, 255 = filled)")
     h.add_argument("--as-mesh", dest="lattice", action="store_false",
-                   help="a mesh made from one depth frame (vertices on a pixel lattice) is "
-                        "filled on that lattice, as its depth image; this fills it as any "
-                        "mesh, in the view plane")
+                   help="a mesh or point cloud made from one depth frame (vertices on a "
+                        "pixel lattice) is filled on that lattice, as its depth image; this "
+                        "fills it as any mesh, in the view plane")
     _add_pieces(h, " (for the fit made here)")
     _add_range(h)
     if full:

@@ -325,8 +325,12 @@ def _fill_lattice_task(scan: Any, lat: Any, out: Path, max_hole_size: Any, seed:
                        pieces: str, progress: bool | None, inputs: tuple) -> dict[str, Any]:
     """Fill a depth frame's mesh on its pixel lattice; write the mesh with the fill."""
     from ._grid_fill import fill_grid
-    from ._lattice import lattice_grid, merge_fill
+    from ._lattice import frame_faces, lattice_grid, merge_fill
+    from ._mesh import Scan
 
+    bare = scan.faces is None or len(scan.faces) == 0
+    if bare:  # a frame's bare point cloud: meshed as its depth image first
+        scan = Scan(scan.points, frame_faces(scan, lat), source=scan.source)
     res = fill_grid(lattice_grid(scan, lat), None, max_hole_size=max_hole_size, seed=seed,
                     pieces=pieces, progress=progress)
     mesh = merge_fill(scan, lat, res.z_filled, res.filled_mask)
@@ -336,7 +340,8 @@ def _fill_lattice_task(scan: Any, lat: Any, out: Path, max_hole_size: Any, seed:
         "output": str(out), "vertices_added": mesh.n_vertices - scan.n_points,
         "faces_added": mesh.n_faces - len(scan.faces),
         "lattice": {"rows": lat.shape[0], "cols": lat.shape[1], "fx": fx, "fy": fy,
-                    "cx": cx, "cy": cy}})
+                    "cx": cx, "cy": cy, "points_only": bare,
+                    "scan_faces": len(scan.faces)}})
 
 
 # --------------------------------------------------------------------------- lod

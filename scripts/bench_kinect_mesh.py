@@ -55,8 +55,9 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
 
     The frame is written as a binary PLY in float32 OpenCV camera coordinates (+y down,
     +z forward, what Open3D writes). Each of ``asrbf fill-holes`` (the frame filled on
-    its pixel lattice), ``asrbf fill-holes --as-mesh`` (filled as any mesh) and a Python
-    process reading the PLY, running screened Poisson at depth 9 (the hole benchmark's
+    its pixel lattice), ``asrbf fill-holes --as-mesh`` (filled as any mesh), both again on
+    the frame's points alone (a PLY without faces: meshed on its lattice, or triangulated
+    in the view plane with ``--as-mesh``) and a Python process reading the PLY, running screened Poisson at depth 9 (the hole benchmark's
     peer) and writing its mesh runs once untimed, then :data:`PROCESS_REPS` times,
     alternating.
     """
@@ -74,11 +75,20 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
         rec = np.zeros(len(scan.faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
         rec["n"], rec["v"] = 3, scan.faces[:, ::-1]
         fh.write(rec.tobytes())
+    cloud = folder / "cloud.ply"  # the frame's points alone (Open3D's point cloud)
+    with open(cloud, "wb") as fh:
+        fh.write((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(p)}\n"
+                  "property float x\nproperty float y\nproperty float z\nend_header\n"
+                  ).encode())
+        fh.write(p.astype("<f4").tobytes())
     exe = Path(sys.executable).parent / "asrbf"  # the installed command, as a user runs it
     asrbf = [str(exe)] if exe.exists() else [sys.executable, "-m", "asrbf_mesh.cli"]
     cmds = {"lattice": asrbf + ["fill-holes", str(src), "-o", str(folder / "a.ply"), "--json"],
             "mesh": asrbf + ["fill-holes", str(src), "-o", str(folder / "m.ply"), "--json",
                              "--as-mesh"],
+            "cloud": asrbf + ["fill-holes", str(cloud), "-o", str(folder / "c.ply"), "--json"],
+            "cloud_mesh": asrbf + ["fill-holes", str(cloud), "-o", str(folder / "cm.ply"),
+                                   "--json", "--as-mesh"],
             "poisson": [sys.executable, "-c", _POISSON, str(src), str(folder / "p.ply")]}
     secs: dict[str, list[float]] = {k: [] for k in cmds}
     out: dict = {}
@@ -91,7 +101,7 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
             secs[k].append(time.perf_counter() - t0)
             if k != "poisson":
                 out[k] = json.loads(run.stdout)
-    return {"secs": secs, "lattice": out["lattice"], "mesh": out["mesh"]}
+    return {"secs": secs} | out
 
 
 def best(fn, runs: int) -> tuple[float, object]:
@@ -162,7 +172,11 @@ def main(argv: list[str] | None = None) -> int:
                               f"{lat['holes_filled']} of {lat['holes_found']} / "
                               f"{lat['vertices_added']:,}", span("lattice"),
                               f"{mesh['holes_filled']} of {mesh['holes_found']} / "
-                              f"{mesh['vertices_added']:,}", span("mesh"), span("poisson")])
+                              f"{mesh['vertices_added']:,}", span("mesh"),
+                              f"{w['cloud']['holes_filled']} of {w['cloud']['holes_found']}",
+                              span("cloud"), f"{w['cloud_mesh']['holes_filled']} of "
+                              f"{w['cloud_mesh']['holes_found']}", span("cloud_mesh"),
+                              span("poisson")])
             print(name, w["secs"], flush=True)
             r = run_frame(scan)
             # the same frame as the PLY the processes read (float32, camera coordinates)
@@ -208,11 +222,17 @@ def main(argv: list[str] | None = None) -> int:
             "shadows beside depth edges from their far side); `--as-mesh` fills it as any "
             "mesh (every "
             "enclosed gap of its footprint in the view plane, the depth edges' shadows too); "
+            "*points only*: the same commands on the frame's points alone (a PLY of "
+            "float32 vertices and no faces, as Open3D's `create_from_depth_image` makes "
+            "it): recognised by its lattice and meshed as its depth image before the fill, "
+            "or `--as-mesh` triangulated and filled in the view plane; "
             "screened Poisson (depth 9): a Python process reading the PLY, "
             "reconstructing and writing the surface.\n\n"
             + table(["frame", "lattice", "fill-holes: holes filled / vertices added",
                      "fill-holes s", "--as-mesh: holes filled / vertices added",
-                     "--as-mesh s", "Poisson s"], proc_rows) + "\n")
+                     "--as-mesh s", "points only: holes filled", "points only s",
+                     "points only --as-mesh: holes filled", "points only --as-mesh s",
+                     "Poisson s"], proc_rows) + "\n")
     print(body)
     if not args.no_write:
         write_section("kinect-mesh", body)

@@ -11,7 +11,7 @@ import pytest
 from asrbf_mesh import tasks
 from asrbf_mesh._grid_fill import fill_grid
 from asrbf_mesh._io import load_scan, save_mesh
-from asrbf_mesh._lattice import find_lattice, lattice_grid, merge_fill
+from asrbf_mesh._lattice import find_lattice, frame_faces, lattice_grid, merge_fill
 from asrbf_mesh._mesh import Mesh, Scan
 from asrbf_mesh._range import RangeGrid
 
@@ -64,7 +64,6 @@ def test_lattice_found_in_either_camera_convention(convention: str) -> None:
 def test_not_a_lattice() -> None:
     grid, _, _ = _frame()
     scan = grid.to_scan()
-    assert find_lattice(Scan(scan.points)) is None  # no triangles
     p = scan.points.copy()
     p[100, 0] += 0.2 * p[100, 2] / K[0]  # one vertex a fifth of a pixel off its ray
     assert find_lattice(Scan(p, scan.faces)) is None
@@ -194,3 +193,66 @@ def test_far_off_vertices_are_no_lattice() -> None:
     p = scan.points.copy()
     p[5, 0] = 1e30 * p[5, 2]  # one ray at an absurd angle: no grid of 1e33 columns
     assert find_lattice(Scan(p, scan.faces)) is None
+
+
+@pytest.mark.parametrize("convention", ["opengl", "opencv-float32"])
+def test_a_bare_point_cloud_of_a_frame_is_found_and_meshed_as_its_depth_image(
+        convention: str) -> None:
+    grid, _, _ = _frame()
+    scan = grid.to_scan()
+    if convention != "opengl":
+        scan = _opencv(scan, np.float32)
+    cloud = Scan(scan.points)
+    lat = find_lattice(cloud)
+    assert lat is not None and lat.shape == grid.shape
+    assert np.allclose(lat.intrinsics, K, rtol=1e-5, atol=1e-4)
+    # the same triangles as the frame's own mesh (each as a set of corners)
+    key = lambda f: np.unique(np.sort(f, axis=1), axis=0)  # noqa: E731
+    assert np.array_equal(key(frame_faces(cloud, lat)), key(scan.faces))
+
+
+def test_bare_clouds_that_are_no_frame() -> None:
+    grid, _, _ = _frame()
+    p = grid.to_scan().points
+    q = p.copy()
+    q[100, 0] += 0.2 * q[100, 2] / K[0]  # one point a fifth of a pixel off its ray
+    assert find_lattice(Scan(q)) is None
+    assert find_lattice(Scan(np.vstack([p, p[:1]]))) is None  # two points on one pixel
+    r, c = np.mgrid[:30, :40].astype(np.float64)  # an orthographic grid
+    ortho = np.column_stack([c.ravel(), r.ravel(), -(5.0 + np.sin(c / 5.0) + 0.1 * r).ravel()])
+    assert find_lattice(Scan(ortho)) is None
+    rng = np.random.default_rng(0)
+    for n in (16, 17, 200, 5000):  # random clouds in front of a camera, some flat
+        cloud = rng.normal(size=(n, 3)) + [0.0, 0.0, 6.0]
+        assert find_lattice(Scan(cloud)) is None
+        cloud[:, 0] = 1.0  # every point on one column ray... of varying depth
+        assert find_lattice(Scan(cloud)) is None
+    line = np.column_stack([np.arange(40.0), np.zeros(40), np.full(40, -3.0)])  # one row
+    assert find_lattice(Scan(line)) is None
+
+
+@pytest.mark.parametrize("suffix", [".xyz", ".ply"])
+def test_cli_task_fills_a_frame_point_cloud_on_its_lattice(tmp_path: Path,
+                                                          suffix: str) -> None:
+    grid, _, voids = _frame()
+    frame = _opencv(grid.to_scan(), np.float32)
+    src = tmp_path / f"frame{suffix}"
+    if suffix == ".xyz":
+        np.savetxt(src, frame.points, fmt="%.9g")
+    else:
+        save_mesh(Mesh(frame.points, np.zeros((0, 3), np.int64)), src)
+    before = src.read_bytes()
+    d = tasks.fill_holes(src, tmp_path / "out.ply", progress=False)
+    assert d["lattice"]["points_only"] and d["cells_filled"] == int(voids.sum())
+    assert d["lattice"]["scan_faces"] == len(frame.faces)
+    assert d["vertices_added"] == int(voids.sum()) and d["faces_added"] > 0
+    out = load_scan(tmp_path / "out.ply")
+    n = frame.n_points
+    assert out.n_points == n + int(voids.sum())
+    assert np.allclose(out.points[:n], frame.points, atol=1e-6)
+    assert len(out.faces) == len(frame.faces) + d["faces_added"]
+    boundary, over, twice = _edges(out.faces)
+    assert over == 0 and twice == 0
+    assert src.read_bytes() == before
+    m = tasks.fill_holes(src, tmp_path / "mesh.ply", progress=False, lattice=False)
+    assert "lattice" not in m and "holes_skipped" in m
