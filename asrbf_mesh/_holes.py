@@ -53,6 +53,7 @@ from scipy.spatial import cKDTree
 from ._footprint import point_cloud_faces, signed_areas
 from ._forked import map_forked
 from ._frame import sampling_spacing
+from ._hole_camera import camera_frame, fill_in_camera
 from ._hole_close import (
     _KEY,
     _agree_with_scan,
@@ -147,7 +148,10 @@ class FillResult:
     seconds : float
         Wall time, fit included when the network was fitted here.
     network : Network
-        The network that gave the depths.
+        The network that gave the depths (with ``frame="camera"``, of the camera frame's
+        coordinates, :mod:`~asrbf_mesh._hole_camera`).
+    frame : {"view", "camera"}
+        Where the holes were filled: the view plane, or a depth camera's projective frame.
     """
 
     mesh: Mesh
@@ -155,6 +159,7 @@ class FillResult:
     border_edges: int
     seconds: float
     network: Network = field(repr=False)
+    frame: str = "view"
 
     @property
     def holes_found(self) -> int:
@@ -187,7 +192,7 @@ class FillResult:
         return {"holes_found": self.holes_found, "holes_filled": self.holes_filled,
                 "holes_skipped": self.holes_skipped, "vertices_added": self.vertices_added,
                 "faces_added": self.faces_added, "border_edges": self.border_edges,
-                "seconds": self.seconds,
+                "seconds": self.seconds, "frame": self.frame,
                 "holes": [h.__dict__ | {"centre": list(h.centre)} for h in self.holes]}
 
 
@@ -562,7 +567,8 @@ def _closed_after_all(partial: dict[int, np.ndarray], infos: list[HoleInfo],
 def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
                max_hole_size: str | float | None = None, blend: str = "thin-plate",
                lowpass_rel: float | None = 1.0, seed: int = 0,
-               progress: bool | None = None, pieces: str | int = "auto") -> FillResult:
+               progress: bool | None = None, pieces: str | int = "auto",
+               frame: str = "auto") -> FillResult:
     """Fill the holes of a range scan with the network's surface.
 
     Parameters
@@ -599,6 +605,12 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     pieces : "auto" or 1
         The fit made when ``net`` is omitted: one network per smooth piece (``"auto"``)
         or the paper's single network (see :func:`~asrbf_mesh.fit`).
+    frame : {"auto", "view"}
+        ``"auto"`` (default): a depth camera's mesh in its camera coordinates (a
+        perspective view from the origin along z, which the view plane folds over) is
+        filled in the camera's projective frame when no ``net`` is given
+        (:mod:`~asrbf_mesh._hole_camera`: hole sizes then measured in the image, scaled
+        to the scan's median depth); ``"view"``: always in the view plane.
 
     Returns
     -------
@@ -618,7 +630,8 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     ConfigError
         If ``net`` is not a Network, ``max_hole_size`` is not a finite positive length
         or a percentage in (0, 100], ``blend`` is unknown, ``lowpass_rel`` is not a
-        finite positive number (or None) or ``seed`` not an integer >= 0.
+        finite positive number (or None), ``seed`` not an integer >= 0 or ``frame``
+        unknown.
     """
     t0 = time.perf_counter()
     scan = _as_scan(scan)
@@ -629,8 +642,14 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     if lowpass_rel is not None:
         check_float(lowpass_rel, "lowpass_rel", low=0.0, low_open=True)
     seed = check_seed(seed)
+    check_choice(frame, "frame", ("auto", "view"))
     diag = scan.bbox_diagonal
     limit = parse_length(max_hole_size, diag, "max_hole_size")
+    cam = camera_frame(scan) if net is None and frame == "auto" else None
+    if cam is not None:
+        return fill_in_camera(fill_holes, scan, cam, limit, diag, blend=blend,
+                              lowpass_rel=lowpass_rel, seed=seed, progress=progress,
+                              pieces=pieces)
     if net is None:
         from ._fit import fit
 

@@ -269,6 +269,10 @@ def _show_fill_holes(d: dict[str, Any], args: argparse.Namespace) -> None:
     if "cells_filled" in d:
         _show_fill_grid(d, args)
         return
+    if d.get("frame") == "camera":
+        print(f"{args.scan}: a depth camera's mesh (a perspective view from the origin, which "
+              "the view plane folds over): filled in the camera's frame, hole sizes in the "
+              "image at the median depth (--as-mesh: in the view plane)")
     print(f"{args.scan}: {d['holes_found']} holes found (outer border left open), "
           f"{d['holes_filled']} filled, {len(d['holes_skipped'])} skipped")
     for h in d["holes"]:

@@ -244,7 +244,8 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
     frame (its vertices on a pixel lattice, :func:`~asrbf_mesh._lattice.find_lattice`)
     is filled on that lattice as its depth image would be, unless ``lattice=False``,
     a network is given or ``blend`` / ``lowpass_rel`` are not their defaults (options
-    of the mesh fill).
+    of the mesh fill); another depth camera's mesh in camera coordinates is filled in
+    the camera's frame (``fill_holes(frame="auto")``), unless ``lattice=False``.
     """
     from ._range_io import RangeOptions, is_range_path, load_range
 
@@ -276,7 +277,7 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
 
     res = fill(data, net, max_hole_size=max_hole_size, blend=blend,
                lowpass_rel=None if lowpass_rel <= 0 else lowpass_rel, seed=seed,
-               progress=progress, pieces=pieces)
+               progress=progress, pieces=pieces, frame="auto" if lattice else "view")
     if kind == "lidar" and out.suffix.lower() in (".las", ".laz"):
         from ._lidar import write_las_with_fill
 

@@ -57,7 +57,9 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
     +z forward, what Open3D writes). Each of ``asrbf fill-holes`` (the frame filled on
     its pixel lattice), ``asrbf fill-holes --as-mesh`` (filled as any mesh), both again on
     the frame's points alone (a PLY without faces: meshed on its lattice, or triangulated
-    in the view plane with ``--as-mesh``) and a Python process reading the PLY, running screened Poisson at depth 9 (the hole benchmark's
+    in the view plane with ``--as-mesh``), ``asrbf fill-holes`` on the mesh as an ASCII
+    PLY rounded to millimetres (off the lattice: filled in the camera's frame) and a
+    Python process reading the PLY, running screened Poisson at depth 9 (the hole benchmark's
     peer) and writing its mesh runs once untimed, then :data:`PROCESS_REPS` times,
     alternating.
     """
@@ -75,6 +77,14 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
         rec = np.zeros(len(scan.faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
         rec["n"], rec["v"] = 3, scan.faces[:, ::-1]
         fh.write(rec.tobytes())
+    rounded = folder / "mm.ply"  # an ASCII export to millimetres: off the pixel lattice
+    with open(rounded, "w") as fh:
+        fh.write(f"ply\nformat ascii 1.0\nelement vertex {len(p)}\nproperty float x\n"
+                 f"property float y\nproperty float z\nelement face {len(scan.faces)}\n"
+                 "property list uchar int vertex_indices\nend_header\n")
+        np.savetxt(fh, p.astype(np.float64), fmt="%.3f")
+        np.savetxt(fh, np.column_stack([np.full(len(scan.faces), 3), scan.faces[:, ::-1]]),
+                   fmt="%d")
     cloud = folder / "cloud.ply"  # the frame's points alone (Open3D's point cloud)
     with open(cloud, "wb") as fh:
         fh.write((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(p)}\n"
@@ -89,6 +99,8 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
             "cloud": asrbf + ["fill-holes", str(cloud), "-o", str(folder / "c.ply"), "--json"],
             "cloud_mesh": asrbf + ["fill-holes", str(cloud), "-o", str(folder / "cm.ply"),
                                    "--json", "--as-mesh"],
+            "rounded": asrbf + ["fill-holes", str(rounded), "-o", str(folder / "r.ply"),
+                                "--json"],
             "poisson": [sys.executable, "-c", _POISSON, str(src), str(folder / "p.ply")]}
     secs: dict[str, list[float]] = {k: [] for k in cmds}
     out: dict = {}
@@ -176,7 +188,9 @@ def main(argv: list[str] | None = None) -> int:
                               f"{w['cloud']['holes_filled']} of {w['cloud']['holes_found']}",
                               span("cloud"), f"{w['cloud_mesh']['holes_filled']} of "
                               f"{w['cloud_mesh']['holes_found']}", span("cloud_mesh"),
-                              span("poisson")])
+                              f"{w['rounded']['holes_filled']} of "
+                              f"{w['rounded']['holes_found']} ({w['rounded']['frame']})",
+                              span("rounded"), span("poisson")])
             print(name, w["secs"], flush=True)
             r = run_frame(scan)
             # the same frame as the PLY the processes read (float32, camera coordinates)
@@ -225,14 +239,16 @@ def main(argv: list[str] | None = None) -> int:
             "*points only*: the same commands on the frame's points alone (a PLY of "
             "float32 vertices and no faces, as Open3D's `create_from_depth_image` makes "
             "it): recognised by its lattice and meshed as its depth image before the fill, "
-            "or `--as-mesh` triangulated and filled in the view plane; "
+            "or `--as-mesh` triangulated and filled in the view plane; *mm*: the frame's "
+            "mesh as an ASCII PLY rounded to millimetres (off the pixel lattice), filled in "
+            "the camera's projective frame (`frame`: where the fill ran); "
             "screened Poisson (depth 9): a Python process reading the PLY, "
             "reconstructing and writing the surface.\n\n"
             + table(["frame", "lattice", "fill-holes: holes filled / vertices added",
                      "fill-holes s", "--as-mesh: holes filled / vertices added",
                      "--as-mesh s", "points only: holes filled", "points only s",
                      "points only --as-mesh: holes filled", "points only --as-mesh s",
-                     "Poisson s"], proc_rows) + "\n")
+                     "mm: holes filled (frame)", "mm s", "Poisson s"], proc_rows) + "\n")
     print(body)
     if not args.no_write:
         write_section("kinect-mesh", body)

@@ -1263,13 +1263,13 @@ def test_a_gap_the_border_walk_ran_through_is_closed_by_a_second_loop_pass(monke
     s = g.to_scan()
     scan = am.Scan((s.points * [1.0, -1.0, -1.0]).astype(np.float32).astype(np.float64),
                    s.faces[:, ::-1])
-    with warnings.catch_warnings():
+    with warnings.catch_warnings():  # in the view plane (by default: the camera's frame)
         warnings.simplefilter("ignore")
-        res = fill_holes(scan, seed=0, progress=False)
+        res = fill_holes(scan, seed=0, progress=False, frame="view")
         with monkeypatch.context() as m:
             m.setattr(holes_mod, "_leave_out_crossings",
                       lambda v, f, outer, owner, *_: (v, f, outer, owner, []))
-            crossing = fill_holes(scan, seed=0, progress=False)
+            crossing = fill_holes(scan, seed=0, progress=False, frame="view")
     big = [h for h in crossing.holes if h.rim_vertices > 100]
     assert len(big) == 1 and big[0].filled and big[0].reason is None
     (big,) = [h for h in res.holes if h.rim_vertices > 100]

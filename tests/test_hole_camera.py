@@ -1,0 +1,156 @@
+"""A depth camera's mesh filled in the camera's projective frame (``_hole_camera``)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import asrbf_mesh as am
+from asrbf_mesh import tasks
+from asrbf_mesh._hole_camera import Camera, camera_frame
+from asrbf_mesh._holes import fill_holes
+from asrbf_mesh._igl import point_mesh_distance
+from asrbf_mesh._range import RangeGrid
+from asrbf_mesh.errors import ConfigError
+
+F = 60.0  # focal length, pixels
+
+
+def _corridor(H: int = 60, W: int = 80) -> tuple[RangeGrid, np.ndarray, np.ndarray]:
+    """A camera down a corridor (walls, floor, ceiling, an end wall at 6 m), three voids.
+
+    Seen along z from far away the walls, floor and ceiling run edge-on and turn over.
+    """
+    r, c = np.mgrid[:H, :W].astype(np.float64)
+    u, v = (c - W / 2 + 0.5) / F, -(r - H / 2 + 0.5) / F  # the image's right and up
+    d = np.full((H, W), 6.0)
+    with np.errstate(divide="ignore"):
+        for hit in (np.where(u < 0, -1.0 / u, np.inf), np.where(u > 0, 1.2 / u, np.inf),
+                    np.where(v < 0, -0.8 / v, np.inf), np.where(v > 0, 1.0 / v, np.inf)):
+            d = np.minimum(d, hit)
+    d = d * (1 + 0.002 * np.sin(c / 3.0) * np.cos(r / 4.0))
+    voids = (((r - 30) ** 2 + (c - 8) ** 2 <= 6) | ((r - 52) ** 2 + (c - 40) ** 2 <= 5)
+             | ((r - 28) ** 2 + (c - 42) ** 2 <= 4))
+    grid = RangeGrid(np.where(voids, np.nan, d), "depth",
+                     intrinsics=(F, F, W / 2 - 0.5, H / 2 - 0.5))
+    return grid, d, voids
+
+
+def _truth(d: np.ndarray, voids: np.ndarray, W: int = 80, H: int = 60) -> np.ndarray:
+    """The voids' true points (OpenGL camera coordinates, as ``RangeGrid.to_scan``)."""
+    r, c = np.nonzero(voids)
+    depth = d[r, c]
+    return np.column_stack([(c - W / 2 + 0.5) / F * depth, -(r - H / 2 + 0.5) / F * depth,
+                            -depth])
+
+
+@pytest.mark.parametrize("sign", [-1.0, 1.0])
+def test_the_frame_maps_back_and_keeps_orientation(sign: float) -> None:
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(50, 3)) * [0.5, 0.5, 0.3] + [0.0, 0.0, 3.0 * sign]
+    cam = Camera(sign, 2.5, 0.1, 0.0)
+    assert np.allclose(cam.from_frame(cam.to_frame(p)), p, rtol=1e-12, atol=1e-12)
+    # a small triangle facing the camera faces +z in the frame, in either convention
+    tri = np.array([[0.0, 0.0, 3.0 * sign], [0.01, 0.0, 3.0 * sign], [0.0, 0.01, 3.0 * sign]])
+    if sign > 0:  # OpenCV: the camera looks along +z, a facing triangle turns clockwise
+        tri = tri[[0, 2, 1]]
+    q = cam.to_frame(tri)
+    e1, e2 = q[1] - q[0], q[2] - q[0]
+    assert e1[0] * e2[1] - e1[1] * e2[0] > 0
+
+
+def test_a_corridor_is_a_camera_view_and_its_voids_are_filled_near_the_truth() -> None:
+    grid, d, voids = _corridor()
+    scan = grid.to_scan()
+    cam = camera_frame(scan)
+    assert cam is not None and cam.sign == -1.0
+    assert cam.flip_view >= 0.01 and cam.flip_rays == 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(scan, seed=0, progress=False)
+    assert res.frame == "camera" and res.to_dict()["frame"] == "camera"
+    assert res.holes_found == 3 and res.holes_filled == 3
+    n = scan.n_points
+    assert np.array_equal(res.mesh.vertices[:n], scan.points)  # the scan as it was
+    assert np.array_equal(res.mesh.faces[:len(scan.faces)], scan.faces)
+    assert np.all(np.isfinite(res.mesh.vertices))
+    truth = _truth(d, voids)
+    err = point_mesh_distance(truth, res.mesh)
+    assert err.max() < 0.01 * scan.bbox_diagonal
+    # each hole's centre is in world coordinates: near its own void's points
+    for h in res.holes:
+        assert np.min(np.linalg.norm(truth - h.centre, axis=1)) < 0.1
+        assert h.size_pct == pytest.approx(100.0 * h.size_abs / scan.bbox_diagonal)
+    # no fill triangle crosses another triangle (pymeshlab's test)
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=res.mesh.vertices, face_matrix=res.mesh.faces))
+    ms.compute_selection_by_self_intersections_per_face()
+    assert not ms.current_mesh().face_selection_array()[len(scan.faces):].any()
+    # the new triangles turn as the scan's do, seen from the camera
+    def facing(faces: np.ndarray) -> np.ndarray:
+        v = res.mesh.vertices
+        nrm = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+        return np.einsum("ij,ij->i", nrm, -v[faces].mean(axis=1))
+    assert np.mean(facing(scan.faces) > 0) > 0.99
+    assert np.all(facing(res.mesh.faces[len(scan.faces):]) > 0)
+
+
+def test_view_plane_on_request_and_with_a_network() -> None:
+    grid, _, _ = _corridor()
+    scan = grid.to_scan()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(scan, seed=0, progress=False, frame="view")
+        assert res.frame == "view"
+        net = am.fit(scan, seed=0, progress=False)
+        assert fill_holes(scan, net, progress=False).frame == "view"
+    with pytest.raises(ConfigError, match="^frame must be one of"):
+        fill_holes(scan, progress=False, frame="camera")
+
+
+def test_scans_that_are_no_camera_view() -> None:
+    face = am.load_scan(am.face_map_path())
+    assert camera_frame(face) is None  # nothing turns over in its view plane
+    assert camera_frame(am.Scan(face.points)) is None  # no triangles to tell by
+    grid, _, _ = _corridor()
+    scan = grid.to_scan()
+    p = scan.points.copy()
+    p[:, 2] += 4.0  # depths crossing zero: no camera at the origin
+    assert camera_frame(am.Scan(p, scan.faces)) is None
+    # the corridor seen from elsewhere: the origin is no camera, its rays turn it over too
+    p = scan.points + [3.0, -2.0, 0.0]
+    assert camera_frame(am.Scan(p, scan.faces)) is None
+    # an orthographic sheet folded over itself, far in front of the origin
+    t = np.linspace(0.0, 1.0, 30)
+    x, y = np.meshgrid(t, t)
+    x = np.where(x < 0.5, x, 1.0 - x) * 2.0
+    z = -10.0 - np.where(np.meshgrid(t, t)[0] < 0.5, 0.0, 0.3)
+    sheet = am.Scan(np.column_stack([x.ravel(), y.ravel(), z.ravel()]))
+    from asrbf_mesh._surface import grid_faces
+
+    folded = am.Scan(sheet.points, grid_faces(30, 30))
+    assert camera_frame(folded) is None
+
+
+def test_cli_task_fills_a_rounded_camera_mesh_in_the_camera_frame(tmp_path: Path) -> None:
+    grid, _, voids = _corridor()
+    scan = grid.to_scan()
+    src = tmp_path / "corridor.ply"
+    with open(src, "w") as fh:  # an ASCII export to millimetres: off the pixel lattice
+        fh.write(f"ply\nformat ascii 1.0\nelement vertex {scan.n_points}\n"
+                 "property float x\nproperty float y\nproperty float z\n"
+                 f"element face {len(scan.faces)}\nproperty list uchar int vertex_indices\n"
+                 "end_header\n")
+        np.savetxt(fh, scan.points, fmt="%.3f")
+        np.savetxt(fh, np.column_stack([np.full(len(scan.faces), 3), scan.faces]), fmt="%d")
+    before = src.read_bytes()
+    d = tasks.fill_holes(src, tmp_path / "out.ply", progress=False)
+    assert "lattice" not in d and d["frame"] == "camera" and d["holes_filled"] == 3
+    assert src.read_bytes() == before
+    d = tasks.fill_holes(src, tmp_path / "view.ply", progress=False, lattice=False)
+    assert d["frame"] == "view"
