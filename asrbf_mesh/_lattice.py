@@ -154,7 +154,10 @@ def find_lattice(scan: Scan) -> Lattice | None:
     if np.bincount(rows * shape[1] + cols, minlength=cells).max() > 1:
         return None  # two vertices on one lattice point
     if bare:
-        return Lattice(rows, cols, shape, u0, su, v0, sv, sign)
+        lat = Lattice(rows, cols, shape, u0, su, v0, sv, sign)
+        # a cloud with no 2 x 2 block of three points (every other pixel) has no
+        # triangle of its own: no frame to mesh, a cloud like any other
+        return lat if len(frame_faces(scan, lat)) else None
     r, c = rows[faces], cols[faces]
     if (r.max(1) - r.min(1)).max() > 1 or (c.max(1) - c.min(1)).max() > 1:
         return None  # a triangle across more than one block

@@ -487,8 +487,9 @@ def _fill_holes_options(h: argparse.ArgumentParser, full: bool = True) -> None:
                                   "cells (uint8, 255 = filled)")
     h.add_argument("--as-mesh", dest="lattice", action="store_false",
                    help="a mesh or point cloud made from one depth frame (vertices on a "
-                        "pixel lattice) is filled on that lattice, as its depth image; this "
-                        "fills it as any mesh, in the view plane")
+                        "pixel lattice) is filled on that lattice, as its depth image, and a "
+                        "depth camera's mesh off its lattice in the camera's frame; this "
+                        "fills either as any mesh, in the view plane")
     _add_pieces(h, " (for the fit made here)")
     _add_range(h)
     if full:

@@ -256,3 +256,18 @@ def test_cli_task_fills_a_frame_point_cloud_on_its_lattice(tmp_path: Path,
     assert src.read_bytes() == before
     m = tasks.fill_holes(src, tmp_path / "mesh.ply", progress=False, lattice=False)
     assert "lattice" not in m and "holes_skipped" in m
+
+
+def test_a_lattice_cloud_with_no_triangle_of_its_own_takes_the_mesh_path(tmp_path: Path) -> None:
+    """Every other pixel of a frame (a checkerboard): on a lattice, but no 2 x 2 block has
+    three points, so no triangle: the cloud is filled as any cloud (was a traceback)."""
+    r, c = np.mgrid[:20, :30].astype(np.float64)
+    keep = (r + c) % 2 == 0
+    d = 2.0 + 0.01 * c
+    p = np.column_stack([((c - 15) / 100.0 * d)[keep], ((r - 10) / 100.0 * d)[keep],
+                         -d[keep]])
+    assert find_lattice(Scan(p)) is None
+    src = tmp_path / "checker.xyz"
+    np.savetxt(src, p, fmt="%.9g")
+    d = tasks.fill_holes(src, tmp_path / "out.ply", progress=False)
+    assert "lattice" not in d and (tmp_path / "out.ply").exists()
