@@ -126,14 +126,13 @@ def test_scans_that_are_no_camera_view() -> None:
     p = scan.points + [3.0, -2.0, 0.0]
     assert camera_frame(am.Scan(p, scan.faces)) is None
     # an orthographic sheet folded over itself, far in front of the origin
-    t = np.linspace(0.0, 1.0, 30)
-    x, y = np.meshgrid(t, t)
-    x = np.where(x < 0.5, x, 1.0 - x) * 2.0
-    z = -10.0 - np.where(np.meshgrid(t, t)[0] < 0.5, 0.0, 0.3)
-    sheet = am.Scan(np.column_stack([x.ravel(), y.ravel(), z.ravel()]))
     from asrbf_mesh._surface import grid_faces
 
-    folded = am.Scan(sheet.points, grid_faces(30, 30))
+    t = np.linspace(0.0, 1.0, 30)
+    u, y = np.meshgrid(t, t)
+    x = 2.0 * np.where(u < 0.5, u, 1.0 - u)  # back over itself from the middle on
+    z = -10.0 - np.where(u < 0.5, 0.0, 0.3)
+    folded = am.Scan(np.column_stack([x.ravel(), y.ravel(), z.ravel()]), grid_faces(30, 30))
     assert camera_frame(folded) is None
 
 
