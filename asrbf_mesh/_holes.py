@@ -610,7 +610,9 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
         perspective view from the origin along z, which the view plane folds over) is
         filled in the camera's projective frame when no ``net`` is given
         (:mod:`~asrbf_mesh._hole_camera`: hole sizes then measured in the image, scaled
-        to the scan's median depth); ``"view"``: always in the view plane.
+        to the scan's median depth); so is its bare point cloud, meshed in the image
+        (:func:`~asrbf_mesh._hole_camera.image_faces`); ``"view"``: always in the view
+        plane.
 
     Returns
     -------
@@ -647,7 +649,7 @@ def fill_holes(scan: Scan | Mesh | np.ndarray, net: Network | None = None, *,
     limit = parse_length(max_hole_size, diag, "max_hole_size")
     cam = camera_frame(scan) if net is None and frame == "auto" else None
     if cam is not None:
-        return fill_in_camera(fill_holes, scan, cam, limit, diag, blend=blend,
+        return fill_in_camera(fill_holes, scan, cam, limit, diag, t0, blend=blend,
                               lowpass_rel=lowpass_rel, seed=seed, progress=progress,
                               pieces=pieces)
     if net is None:

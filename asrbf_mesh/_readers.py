@@ -22,6 +22,7 @@ from typing import BinaryIO
 import numpy as np
 import plyfile
 
+from ._ply_ascii import read_ascii_body
 from ._validate import one_line, plural
 from .errors import ScanError
 
@@ -248,9 +249,18 @@ def read_ply_data(fh: BinaryIO) -> plyfile.PlyData:
     """Read a PLY file (ASCII or binary) with :mod:`plyfile`, memory-mapping binary data.
 
     Faces of three vertices take plyfile's memory-mapped fast path; polygons of several
-    sizes are read row by row. Raises :class:`ParseError` when the file is shorter, or
+    sizes are read row by row. An ASCII body of one row per line is parsed by numpy
+    (:mod:`asrbf_mesh._ply_ascii`). Raises :class:`ParseError` when the file is shorter, or
     (binary) longer, than its header announces.
     """
+    start = fh.tell()
+    try:
+        head = plyfile.PlyData._parse_header(fh)
+    except (plyfile.PlyParseError, ValueError):
+        head = None  # plyfile's read below says what is wrong
+    if head is not None and head.text and read_ascii_body(head, fh.read()):
+        return head
+    fh.seek(start)
     fast = {"face": {"vertex_indices": 3, "vertex_index": 3}}
     try:
         try:

@@ -270,7 +270,7 @@ def _show_fill_holes(d: dict[str, Any], args: argparse.Namespace) -> None:
         _show_fill_grid(d, args)
         return
     if d.get("frame") == "camera":
-        print(f"{args.scan}: a depth camera's mesh (a perspective view from the origin, which "
+        print(f"{args.scan}: a depth camera's data (a perspective view from the origin, which "
               "the view plane folds over): filled in the camera's frame, hole sizes in the "
               "image at the median depth (--as-mesh: in the view plane)")
     print(f"{args.scan}: {d['holes_found']} holes found (outer border left open), "
@@ -488,8 +488,8 @@ def _fill_holes_options(h: argparse.ArgumentParser, full: bool = True) -> None:
     h.add_argument("--as-mesh", dest="lattice", action="store_false",
                    help="a mesh or point cloud made from one depth frame (vertices on a "
                         "pixel lattice) is filled on that lattice, as its depth image, and a "
-                        "depth camera's mesh off its lattice in the camera's frame; this "
-                        "fills either as any mesh, in the view plane")
+                        "depth camera's mesh or point cloud off its lattice in the camera's "
+                        "frame; this fills any of them as any mesh, in the view plane")
     _add_pieces(h, " (for the fit made here)")
     _add_range(h)
     if full:

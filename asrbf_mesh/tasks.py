@@ -244,8 +244,9 @@ def fill_holes(scan: str | os.PathLike, output: str | os.PathLike, *,
     frame (its vertices on a pixel lattice, :func:`~asrbf_mesh._lattice.find_lattice`)
     is filled on that lattice as its depth image would be, unless ``lattice=False``,
     a network is given or ``blend`` / ``lowpass_rel`` are not their defaults (options
-    of the mesh fill); another depth camera's mesh in camera coordinates is filled in
-    the camera's frame (``fill_holes(frame="auto")``), unless ``lattice=False``.
+    of the mesh fill); another depth camera's mesh or point cloud in camera coordinates
+    is filled in the camera's frame (``fill_holes(frame="auto")``), unless
+    ``lattice=False``.
     """
     from ._range_io import RangeOptions, is_range_path, load_range
 

@@ -41,6 +41,7 @@ import asrbf_mesh as am  # noqa: E402
 FIT_REPS = 5
 #: Whole-process runs of each command, alternating; every run is reported (min-max).
 PROCESS_REPS = 3
+VOXEL = 0.01  # m: the voxel grid of the downsampled cloud (Open3D's voxel_down_sample)
 
 _POISSON = """
 import sys
@@ -58,7 +59,8 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
     its pixel lattice), ``asrbf fill-holes --as-mesh`` (filled as any mesh), both again on
     the frame's points alone (a PLY without faces: meshed on its lattice, or triangulated
     in the view plane with ``--as-mesh``), ``asrbf fill-holes`` on the mesh as an ASCII
-    PLY rounded to millimetres (off the lattice: filled in the camera's frame) and a
+    PLY rounded to millimetres (off the lattice: filled in the camera's frame), on its
+    points averaged per 1 cm voxel (with and without ``--as-mesh``) and a
     Python process reading the PLY, running screened Poisson at depth 9 (the hole benchmark's
     peer) and writing its mesh runs once untimed, then :data:`PROCESS_REPS` times,
     alternating.
@@ -91,6 +93,18 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
                   "property float x\nproperty float y\nproperty float z\nend_header\n"
                   ).encode())
         fh.write(p.astype("<f4").tobytes())
+    voxels = folder / "voxels.ply"  # Open3D's voxel_down_sample(0.01): off the lattice
+    key = np.floor(p.astype(np.float64) / VOXEL).astype(np.int64)
+    _, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    v = np.zeros((inv.max() + 1, 3))
+    np.add.at(v, inv, p.astype(np.float64))
+    v /= np.bincount(inv)[:, None]
+    with open(voxels, "wb") as fh:
+        fh.write((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
+                  "property float x\nproperty float y\nproperty float z\nend_header\n"
+                  ).encode())
+        fh.write(v.astype("<f4").tobytes())
     exe = Path(sys.executable).parent / "asrbf"  # the installed command, as a user runs it
     asrbf = [str(exe)] if exe.exists() else [sys.executable, "-m", "asrbf_mesh.cli"]
     cmds = {"lattice": asrbf + ["fill-holes", str(src), "-o", str(folder / "a.ply"), "--json"],
@@ -101,6 +115,10 @@ def whole_process(scan: am.Scan, folder: Path) -> dict:
                                    "--json", "--as-mesh"],
             "rounded": asrbf + ["fill-holes", str(rounded), "-o", str(folder / "r.ply"),
                                 "--json"],
+            "voxels": asrbf + ["fill-holes", str(voxels), "-o", str(folder / "v.ply"),
+                               "--json"],
+            "voxels_mesh": asrbf + ["fill-holes", str(voxels), "-o", str(folder / "vm.ply"),
+                                    "--json", "--as-mesh"],
             "poisson": [sys.executable, "-c", _POISSON, str(src), str(folder / "p.ply")]}
     secs: dict[str, list[float]] = {k: [] for k in cmds}
     out: dict = {}
@@ -190,7 +208,12 @@ def main(argv: list[str] | None = None) -> int:
                               f"{w['cloud_mesh']['holes_found']}", span("cloud_mesh"),
                               f"{w['rounded']['holes_filled']} of "
                               f"{w['rounded']['holes_found']} ({w['rounded']['frame']})",
-                              span("rounded"), span("poisson")])
+                              span("rounded"),
+                              f"{w['voxels']['holes_filled']} of "
+                              f"{w['voxels']['holes_found']} ({w['voxels']['frame']})",
+                              span("voxels"), f"{w['voxels_mesh']['holes_filled']} of "
+                              f"{w['voxels_mesh']['holes_found']}", span("voxels_mesh"),
+                              span("poisson")])
             print(name, w["secs"], flush=True)
             r = run_frame(scan)
             # the same frame as the PLY the processes read (float32, camera coordinates)
@@ -241,14 +264,19 @@ def main(argv: list[str] | None = None) -> int:
             "it): recognised by its lattice and meshed as its depth image before the fill, "
             "or `--as-mesh` triangulated and filled in the view plane; *mm*: the frame's "
             "mesh as an ASCII PLY rounded to millimetres (off the pixel lattice), filled in "
-            "the camera's projective frame (`frame`: where the fill ran); "
+            "the camera's projective frame (`frame`: where the fill ran); *1 cm voxels*: "
+            "the frame's points averaged per 1 cm voxel (Open3D's `voxel_down_sample`), a "
+            "float32 PLY of points alone, off the lattice: meshed in the camera's image and "
+            "filled there, or `--as-mesh` triangulated and filled in the view plane; "
             "screened Poisson (depth 9): a Python process reading the PLY, "
             "reconstructing and writing the surface.\n\n"
             + table(["frame", "lattice", "fill-holes: holes filled / vertices added",
                      "fill-holes s", "--as-mesh: holes filled / vertices added",
                      "--as-mesh s", "points only: holes filled", "points only s",
                      "points only --as-mesh: holes filled", "points only --as-mesh s",
-                     "mm: holes filled (frame)", "mm s", "Poisson s"], proc_rows) + "\n")
+                     "mm: holes filled (frame)", "mm s", "1 cm voxels: holes filled (frame)",
+                     "1 cm voxels s", "1 cm voxels --as-mesh: holes filled",
+                     "1 cm voxels --as-mesh s", "Poisson s"], proc_rows) + "\n")
     print(body)
     if not args.no_write:
         write_section("kinect-mesh", body)
