@@ -243,10 +243,11 @@ class Footprint:
         stray = isolated_points(xy, workers=max(1, numba.get_num_threads()))
         box = xy[~stray] if stray.any() and not stray.all() else xy
         lo = box.min(axis=0) - 3 * cell
-        nx, ny = (np.ceil((box.max(axis=0) + 3 * cell - lo) / cell).astype(int) + 1)
-        if nx * ny > 200_000_000:
+        n = np.ceil((box.max(axis=0) + 3 * cell - lo) / cell) + 1
+        if not (np.all(np.isfinite(n)) and float(n[0]) * float(n[1]) <= 200_000_000):
             raise ScanError("the scan's footprint raster would be too large "
                             "(spacing too small?)")
+        nx, ny = n.astype(int)
         cov = _hk.coverage(xy, faces, lo, cell, int(nx), int(ny))
         labels, _ = ndimage.label(~cov, structure=np.ones((3, 3), bool))
         outside = frozenset(np.unique(np.concatenate(

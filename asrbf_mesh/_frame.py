@@ -152,8 +152,16 @@ def _rotation(points: np.ndarray, view_axis: str) -> np.ndarray:
     return np.column_stack([ax0, ax1, depth])
 
 
+#: :func:`sampling_spacing`: points closer than this share of the larger extent are one
+#: (copies written twice, once through float32; a cloud with half its points repeated
+#: 1e-13 away made a spacing of 1e-13 and a footprint raster of 10^26 cells).
+NEAR_COPY = 1e-9
+
+
 def sampling_spacing(xy: np.ndarray, *, max_samples: int = 50_000, seed: int = 0) -> float:
-    """Median nearest-neighbour distance of (N, 2) points (ignoring exact duplicates).
+    """Median nearest-neighbour distance of (N, 2) points (ignoring copies).
+
+    Copies: points at the same place, or within :data:`NEAR_COPY` of the larger extent.
 
     Examples
     --------
@@ -168,11 +176,16 @@ def sampling_spacing(xy: np.ndarray, *, max_samples: int = 50_000, seed: int = 0
         at = np.arange(len(xy))
     d, _ = knn(xy, at, min(4, len(xy)))
     d = d[:, 1:]
-    d = np.where(d > 0, d, np.inf).min(axis=1)
+    near = NEAR_COPY * float(np.ptp(xy, axis=0).max()) if len(xy) else 0.0
+    d = np.where(d > near, d, np.inf).min(axis=1)
     if not np.isfinite(d).all():
         # some point has only copies among its nearest neighbours: measure the distinct
         # positions instead (a scan without such copies keeps its exact spacing)
-        distinct = np.unique(xy, axis=0)
+        if near > 0:
+            cells = np.floor((xy - xy.min(axis=0)) / near)
+            distinct = xy[np.unique(cells, axis=0, return_index=True)[1]]
+        else:
+            distinct = np.unique(xy, axis=0)
         if len(distinct) < 2:
             raise ScanError("all points share the same (x, y): no sampling spacing")
         if len(distinct) < len(xy):

@@ -171,6 +171,12 @@ def test_sampling_spacing_of_regular_grids() -> None:
     assert sampling_spacing(g * [0.02, 0.05]) == pytest.approx(0.02, rel=1e-12)
     with pytest.raises(ScanError, match="same"):
         sampling_spacing(np.zeros((5, 2)))
+    # copies a hair apart (written twice, once through float32) are copies too: the
+    # spacing was 1e-13 and the hole fill's footprint raster 10^26 cells
+    rng = np.random.default_rng(0)
+    for hair in (1e-13, 1e-9 * 7.25 * 0.5):
+        near = g[::2] * 0.25 + rng.uniform(-hair, hair, (len(g[::2]), 2))
+        assert sampling_spacing(np.concatenate([g * 0.25, near])) == pytest.approx(0.25)
 
 
 def test_sampling_spacing_subsamples_large_inputs() -> None:

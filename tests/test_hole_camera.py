@@ -262,3 +262,18 @@ def test_random_camera_clouds_fill_without_crossing(seed: int) -> None:
     made = len(cam.faces) if cam is not None else len(res.mesh.faces) - res.faces_added
     assert len(crossing_faces(v, res.mesh.faces, made)) == 0
     assert all(h.filled or h.reason for h in res.holes)
+
+
+def test_a_cloud_with_copies_a_hair_apart_is_filled() -> None:
+    """Half the points written again 1e-13 away (a footprint raster of 10^26 cells made a
+    numpy error, a traceback, before copies were told within a share of the extent)."""
+    grid, _, _ = _corridor()
+    p = grid.to_scan().points
+    rng = np.random.default_rng(0)
+    p = np.vstack([p, p[::2] + rng.normal(0.0, 1e-13, (len(p[::2]), 3))])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for frame in ("auto", "view"):
+            res = fill_holes(am.Scan(p), seed=0, progress=False, frame=frame)
+            assert np.all(np.isfinite(res.mesh.vertices))
+            assert all(h.filled or h.reason for h in res.holes)
