@@ -151,8 +151,8 @@ def camera_frame(scan: Scan) -> Camera | None:
     more than along the rays (:data:`COVERED_RATIO` of that at most). A bare point cloud
     is meshed in the image first (:func:`image_faces`; then nothing overlaps along the
     rays): a camera's turns over in the view plane (a TUM frame voxel-downsampled to
-    1 cm: 18 %), a height field's seen from any point in front of it does not (the
-    synthetic and model views 1.5, 2 and 4 extents in front of the origin: 0.05 % at
+    1 cm: 18 %), a height field's seen from a point in front of it does not (the
+    synthetic and model views 0.6, 1 and 3 extents in front of the origin: 0.05 % at
     most).
     """
     faces, p = scan.faces, scan.points
@@ -164,6 +164,10 @@ def camera_frame(scan: Scan) -> Camera | None:
         return None
     sign, d = looking
     cam = Camera(sign, float(np.median(d)), 0.0, 0.0)
+    with np.errstate(all="ignore"):
+        q = cam.to_frame(p)
+    if not np.all(np.isfinite(q)):
+        return None  # (a depth so near zero that its inverse overflows)
     if cloud:
         faces = image_faces(p, cam)
         if len(faces) < 2:
@@ -173,9 +177,6 @@ def camera_frame(scan: Scan) -> Camera | None:
         return None
     if cloud:
         return dataclasses.replace(cam, covered_view=view, faces=faces)
-    q = cam.to_frame(p)
-    if not np.all(np.isfinite(q)):
-        return None
     rays = _covered(q[:, :2], faces)
     if rays > COVERED_RATIO * view:
         return None

@@ -146,6 +146,12 @@ def test_scans_that_are_no_camera_view() -> None:
     for ahead in (0.6, 1.0, 3.0):
         cam = camera_frame(am.Scan(bump - [0.5, 0.5, 0.3 + ahead]))
         assert cam is None
+    # the corridor's points with one a hair in front of the camera: its inverse depth
+    # overflows (the frame would not be finite)
+    p = scan.points.copy()
+    p[0] = [1e-311, 1e-311, -1e-310]  # c^2 / d: 9 / 1e-310 is past the largest double
+    assert camera_frame(am.Scan(p)) is None
+    assert camera_frame(am.Scan(p[1:])) is not None  # (without it: a camera's)
 
 
 def _off_lattice(scan: am.Scan, seed: int) -> am.Scan:
