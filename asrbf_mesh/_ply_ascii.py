@@ -35,6 +35,8 @@ def _typed(values: np.ndarray, integral: np.ndarray, dtype: np.dtype) -> np.ndar
     if dtype.kind == "f":
         with np.errstate(over="ignore"):  # beyond float32: inf, as plyfile reads it
             return values.astype(dtype)
+    if dtype.itemsize > 4:
+        return None  # beyond 2^53 a double would round the integer: plyfile reads it
     info = np.iinfo(dtype)
     ok = integral & (values >= info.min) & (values <= info.max)
     return values.astype(dtype) if ok.all() else None

@@ -254,8 +254,9 @@ def read_ply_data(fh: BinaryIO) -> plyfile.PlyData:
     (binary) longer, than its header announces.
     """
     start = fh.tell()
+    parse_header = getattr(plyfile.PlyData, "_parse_header", None)  # (plyfile's, private)
     try:
-        head = plyfile.PlyData._parse_header(fh)
+        head = parse_header(fh) if parse_header is not None else None
     except (plyfile.PlyParseError, ValueError):
         head = None  # plyfile's read below says what is wrong
     if head is not None and head.text and read_ascii_body(head, fh.read()):

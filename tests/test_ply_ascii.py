@@ -161,3 +161,4 @@ def test_mutated_files_read_as_plyfile_reads_them(tmp_path, monkeypatch) -> None
             assert np.array_equal(fast[0], slow[0], equal_nan=True)
             assert (fast[1] is None and slow[1] is None) or np.array_equal(fast[1], slow[1])
     assert taken >= 20  # some mutants stay plain (a digit for a digit, a space more)
+
