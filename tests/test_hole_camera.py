@@ -283,3 +283,22 @@ def test_a_cloud_with_copies_a_hair_apart_is_filled() -> None:
             res = fill_holes(am.Scan(p), seed=0, progress=False, frame=frame)
             assert np.all(np.isfinite(res.mesh.vertices))
             assert all(h.filled or h.reason for h in res.holes)
+
+
+def test_cli_task_fills_a_camera_cloud_in_the_camera_frame(tmp_path: Path) -> None:
+    """A thinned, jittered frame's points as an XYZ file: no lattice to find, meshed in the
+    image and filled in the camera's frame (``--as-mesh``: the view plane)."""
+    grid, _, _ = _corridor()
+    cloud = _off_lattice(grid.to_scan(), 1)
+    src = tmp_path / "corridor.xyz"
+    np.savetxt(src, cloud.points)
+    before = src.read_bytes()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d = tasks.fill_holes(src, tmp_path / "out.ply", progress=False)
+        view = tasks.fill_holes(src, tmp_path / "view.ply", progress=False, lattice=False)
+    assert "lattice" not in d and d["frame"] == "camera" and view["frame"] == "view"
+    assert d["holes_filled"] == d["holes_found"] >= 1
+    assert src.read_bytes() == before
+    out = am.load_scan(tmp_path / "out.ply", height_field=False)
+    assert np.allclose(out.points[:cloud.n_points], cloud.points)  # (the PLY's float32)
