@@ -50,6 +50,12 @@ MAX_TAN = 2.0
 #: point's :data:`CLOUD_NEIGHBOURS` nearest in the image, the larger of its two ends) ...
 CLOUD_LONGEST = 2.5
 CLOUD_NEIGHBOURS = 6
+#: The covered shares are measured on at most this many of the scan's vertices (a
+#: seeded sample): on a TUM frame's mesh (204,859 vertices, 397,101 triangles) both
+#: shares took 1.4 s of `fill-holes` measured on every vertex; the thresholds above lie
+#: far from every share measured (0.2 % against 0.03 % or 0.5 % and more), where a
+#: sample of 50,000 errs by about 0.01 %.
+COVER_SAMPLE = 50_000
 #: The fill's new vertices are held within these factors of the scan's nearest and
 #: farthest inverse depths (a guard: no vertex at infinity or behind the camera).
 _W_RANGE = (0.5, 2.0)
@@ -86,13 +92,20 @@ class Camera:
 
 
 def _covered(xy: np.ndarray, faces: np.ndarray) -> float:
-    """Share of the points ``xy`` strictly inside one of the 12 triangles nearest them."""
+    """Share of the points ``xy`` strictly inside one of the 12 triangles nearest them.
+
+    Measured on :data:`COVER_SAMPLE` of the points at most (seeded: the same share each
+    time).
+    """
     from scipy.spatial import cKDTree
 
     from . import _holes_kernels as _hk
 
-    _, cand = cKDTree(xy[faces].mean(axis=1)).query(xy, k=min(12, len(faces)))
-    return float(_hk.inside_any(xy, xy, faces, cand).mean())
+    at = xy
+    if len(xy) > COVER_SAMPLE:
+        at = xy[np.random.default_rng(0).choice(len(xy), COVER_SAMPLE, replace=False)]
+    _, cand = cKDTree(xy[faces].mean(axis=1)).query(at, k=min(12, len(faces)), workers=-1)
+    return float(_hk.inside_any(at, xy, faces, cand).mean())
 
 
 def _looking(p: np.ndarray) -> tuple[float, np.ndarray] | None:

@@ -3,8 +3,9 @@
 The paper (Meng et al. 2013) gives two ways to get a multi-resolution set of meshes
 from the learned representation:
 
-- ``resample``: one network, sampled on successively coarser grids (spacing
-  ``s0 * 2**i`` for level ``i``);
+- ``resample``: one network, sampled on successively coarser grids (level 0 about the
+  scan's own spacing, level 1 twice as coarse, the coarsest at ``s0 * 2**i``:
+  :func:`resample_spacings`);
 - ``refit``: one network per level, learned with a coarser separation level
   ``D_min = d0 * 2**i``, each sampled at a grid that matches its own detail, so every
   level's network is itself compact.
@@ -35,7 +36,7 @@ import numpy as np
 from . import _config
 from ._config import FitConfig
 from ._fit import fit
-from ._frame import Frame, to_height_field
+from ._frame import Frame, sampling_spacing, to_height_field
 from ._io import Scan
 from ._learn import auto_d_min
 from ._mesh import Mesh
@@ -71,6 +72,43 @@ MIN_LEVEL_SAMPLES = 4
 #: the scan does not have, which Metro samples
 #: (:func:`~asrbf_mesh._surface.reconstruct`, ``max_wall``).
 LOD_MAX_WALL = 3.0
+#: ``resample``: levels past level 1 grow by at least this factor each, and level 0
+#: takes the scan's own spacing where ``s0`` is finer than this share of it (see
+#: :func:`resample_spacings`).
+MIN_LEVEL_STEP = 1.25
+FINER_THAN_SCAN = 0.9
+
+
+def resample_spacings(s0: float, own: float, levels: int) -> list[float]:
+    """Grid spacings of a ``resample`` set's levels, finest first (scan units).
+
+    ``s0``: the unit square's sampling spacing times the geometric mean of the scan's
+    two extents; ``own``: the scan's own spacing in the view plane (median nearest
+    neighbour, scan units). The two agree on a scan about as wide as long; on an
+    elongated one ``s0`` is finer (the unit square's spacing is measured along its long
+    axis): 0.63 of ``own`` on a view of a bone 2.5 times as long as wide, 0.42 on an
+    airplane's. Level 0 is ``s0``, or the scan's own spacing where ``s0`` is finer than
+    :data:`FINER_THAN_SCAN` of it: never much finer than the scan's own sampling (a
+    finer grid adds vertices and follows the network between the samples: on the bone
+    view 2.5 times as many vertices as the scan has points, and a Metro RMS above level
+    1's); level 1 is twice level 0; the coarsest level stays at
+    ``s0 * 2**(levels - 1)`` (the old rule's, whose 99.9th percentiles keep within 1 % of
+    the diagonal), or :data:`MIN_LEVEL_STEP` per level past level 1 if that is coarser;
+    the levels between are spaced geometrically.
+
+    Examples
+    --------
+    >>> [round(s, 3) for s in resample_spacings(0.95, 1.0, 4)]
+    [0.95, 1.9, 3.8, 7.6]
+    >>> [round(s, 3) for s in resample_spacings(0.5, 1.0, 4)]
+    [1.0, 2.0, 2.828, 4.0]
+    """
+    first = own if s0 < FINER_THAN_SCAN * own else s0
+    if levels == 1:
+        return [first]
+    last = max(s0 * 2.0 ** (levels - 1), 2.0 * first * MIN_LEVEL_STEP ** (levels - 2))
+    steps = np.arange(levels - 1) / max(levels - 2, 1)
+    return [first, *(float(s) for s in 2.0 * first * (last / (2.0 * first)) ** steps)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -269,15 +307,17 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         the most this scan allows), as are ``refit`` levels whose D_min would exceed
         D_max.
     method : {"resample", "refit"}
-        ``resample``: one network sampled at grid spacings ``s0 * 2**i``, where ``s0`` is
-        the scan's sampling spacing in the unit square (median nearest neighbour) times
-        the geometric mean of the scan's two extents: the scan's own spacing for a scan
-        about as wide as long, finer for an elongated one (0.63 of it on a view of a bone
-        2.5 times as long as wide). ``refit``: one fit per level with
-        ``D_min = d0 * 2**i`` (``d0``: the automatic D_min of the scan, 0.01 for the
-        paper's defaults and the scans shipped here), sampled at spacing ``D_min / 4``
-        in scan units (level 0 not finer than the scan's spacing, the others scaled
-        with D_min from it).
+        ``resample``: one network sampled on grids from ``s0`` (level 0) to
+        ``s0 * 2**(levels - 1)``, where ``s0`` is the scan's sampling spacing in the unit
+        square times the geometric mean of the scan's two extents (the scan's own
+        spacing for a scan about as wide as long, finer for an elongated one, whose
+        level 0 takes the scan's own spacing in the view plane instead); level 1 twice as
+        coarse as level 0, the levels between spaced geometrically
+        (:func:`resample_spacings`). ``refit``: one
+        fit per level with ``D_min = d0 * 2**i`` (``d0``: the automatic D_min of the
+        scan, 0.01 for the paper's defaults and the scans shipped here), sampled at
+        spacing ``D_min / 4`` in scan units (level 0 not finer than ``s0``, the others
+        scaled with D_min from it).
     net : Network, optional
         ``resample``: the network to sample (default: ``fit(scan, seed=seed)``).
         ``refit``: its configuration (and view axis) is the base of every level's fit,
@@ -301,7 +341,7 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         natural holes filled).
     base_resolution : int, optional
         Samples along the longer side of the level-0 grid, instead of the default
-        spacing above; coarser levels scale it by ``2**i`` (``resample``) or by
+        spacings above; coarser levels scale it by ``2**i`` (``resample``) or by
         ``D_min_i / D_min_0`` (``refit``).
     pieces : "auto" or 1
         The fits made here: one network per smooth piece (``"auto"``), each level's mesh
@@ -387,20 +427,25 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         gmean = float(np.sqrt(frame.scale[0] * frame.scale[1]))
         if base_resolution is not None:
             s0 = float(frame.scale[:2].max()) / (base_resolution - 1)
+            spacings = [s0 * 2.0 ** min(i, 200) for i in range(levels)]
+            _check_coarsest(levels, frame.scale[:2], spacings.__getitem__)
         else:
             s0 = float(spacing) * gmean
-        _check_coarsest(levels, frame.scale[:2], lambda i: s0 * 2.0 ** min(i, 200))
+            own = sampling_spacing((sc.points @ frame.rotation)[:, :2])
+            _check_coarsest(levels, frame.scale[:2],
+                            lambda i: resample_spacings(s0, own, min(i, 200) + 1)[-1])
+            spacings = resample_spacings(s0, own, levels)
         if net is None:
             net = fit(sc, seed=seed, pieces=pieces, progress=False)
         net, nbytes = shipped(net)
         out = []
         for i in range(levels):
             t = time.perf_counter()
-            mesh = reconstruct(net, spacing_abs=s0 * 2**i, max_wall=LOD_MAX_WALL, **fp_kw)
+            mesh = reconstruct(net, spacing_abs=spacings[i], max_wall=LOD_MAX_WALL, **fp_kw)
             d_min = net.info.get("d_min")
             out.append(LodLevel(i, "resample", mesh, nbytes,
                                 None if d_min is None else float(d_min), net.n_neurons,
-                                time.perf_counter() - t, s0 * 2**i, net))
+                                time.perf_counter() - t, spacings[i], net))
         return out
 
     # refit

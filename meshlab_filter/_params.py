@@ -330,8 +330,9 @@ FILTERS: dict[str, FilterSpec] = {spec.name: spec for spec in (
         (
             Param("levels", "int", 4, "Number of levels.", minimum=1),
             Param("method", "enum", "resample", "'resample': one network sampled on grids "
-                  "twice as coarse per level; 'refit': one network per level, fitted with "
-                  "a separation level D_min twice as large per level.",
+                  "from the scan's own spacing (level 0) to coarser ones; 'refit': one "
+                  "network per level, fitted with a separation level D_min twice as large "
+                  "per level.",
                   choices=("resample", "refit")),
             Param("targetfacenum", "int", 0, "About this many faces at level 0 (coarser "
                   "levels scale with it); 0: level 0 at the scan's own sampling spacing.",

@@ -302,3 +302,20 @@ def test_cli_task_fills_a_camera_cloud_in_the_camera_frame(tmp_path: Path) -> No
     assert src.read_bytes() == before
     out = am.load_scan(tmp_path / "out.ply", height_field=False)
     assert np.allclose(out.points[:cloud.n_points], cloud.points)  # (the PLY's float32)
+
+
+def test_the_covered_share_of_a_large_mesh_is_measured_on_a_sample(monkeypatch) -> None:
+    # a corridor of 280 x 220 pixels (61,600 vertices, more than COVER_SAMPLE): its
+    # shares from a seeded sample of the vertices agree with every vertex's within 0.005,
+    # and come out the same each time
+    from asrbf_mesh import _hole_camera
+
+    grid, _, _ = _corridor(220, 280)
+    scan = grid.to_scan()
+    assert scan.n_points > _hole_camera.COVER_SAMPLE
+    xy, faces = scan.points[:, :2], scan.faces
+    sampled = _hole_camera._covered(xy, faces)
+    assert sampled == _hole_camera._covered(xy, faces)
+    monkeypatch.setattr(_hole_camera, "COVER_SAMPLE", scan.n_points)
+    every = _hole_camera._covered(xy, faces)
+    assert every > 0.01 and abs(sampled - every) < 0.005

@@ -12,12 +12,14 @@ import pytest
 from _grids import mm_grid
 
 import asrbf_mesh as am
+from asrbf_mesh._frame import sampling_spacing
 from asrbf_mesh._lod import (
     MIN_LEVEL_SAMPLES,
     LodLevel,
     lod_set,
     network_file_bytes,
     ply_bytes,
+    resample_spacings,
 )
 from asrbf_mesh.errors import AsrbfError, ConfigError
 from asrbf_mesh.evaluate import QEM_BASELINES, _simplify, write_lod_set
@@ -90,6 +92,45 @@ def test_resample_levels_share_one_network(resampled: list[LodLevel]) -> None:
     np.testing.assert_allclose(np.diff(np.log2(spacing)), 1.0)  # the grid doubles
     faces = [lv.mesh.n_faces for lv in resampled]
     assert faces[0] > 3 * faces[1] > 9 * faces[2] > 0
+
+
+def test_resample_level_zero_of_a_scan_about_as_wide_as_long(scan, resampled) -> None:
+    # the Franke grid's own spacing (1.22 mm across y) is within a tenth of the unit
+    # square's spacing times the geometric mean of the extents (1.17 mm): level 0 at the
+    # latter, the levels doubling
+    net = resampled[0].network
+    s0 = net.info["spacing"] * float(np.sqrt(net.frame.scale[0] * net.frame.scale[1]))
+    own = sampling_spacing((scan.points @ net.frame.rotation)[:, :2])
+    assert 0.9 * own < s0 < own
+    np.testing.assert_allclose([lv.spacing_abs for lv in resampled],
+                               resample_spacings(s0, own, 3))
+    np.testing.assert_allclose([lv.spacing_abs for lv in resampled], [s0, 2 * s0, 4 * s0])
+
+
+def test_resample_level_zero_of_an_elongated_scan(syn) -> None:
+    # a grid four times as long as wide, spacing 1 both ways: the unit square's spacing
+    # (along the long side) times the geometric mean of the extents is half the scan's
+    # spacing; level 0 stays at the scan's own, with about as many vertices as points
+    pts, faces = mm_grid(syn.franke, 121, 31)
+    pts[:, 0] = 100 + (pts[:, 0] - pts[:, 0].min()) / np.ptp(pts[:, 0]) * 120
+    pts[:, 1] = 20 + (pts[:, 1] - pts[:, 1].min()) / np.ptp(pts[:, 1]) * 30
+    scan = am.Scan(pts, faces)
+    levels = lod_set(scan, levels=3, seed=0)
+    assert levels[0].spacing_abs == pytest.approx(1.0)
+    assert levels[0].mesh.n_vertices <= 1.1 * len(pts)
+    assert levels[1].spacing_abs == pytest.approx(2.0)
+    assert levels[2].spacing_abs > 2.4
+    assert levels[0].mesh.n_faces > levels[1].mesh.n_faces > levels[2].mesh.n_faces
+
+
+def test_resample_spacings_rule() -> None:
+    assert resample_spacings(1.0, 0.9, 1) == [1.0]
+    np.testing.assert_allclose(resample_spacings(1.0, 0.9, 4), [1, 2, 4, 8])
+    np.testing.assert_allclose(resample_spacings(0.95, 1.0, 3), [0.95, 1.9, 3.8])
+    np.testing.assert_allclose(resample_spacings(0.5, 1.0, 3), [1, 2, 2.5])  # step 1.25
+    got = resample_spacings(0.4, 1.0, 5)
+    np.testing.assert_allclose(got[:2], [1, 2])
+    assert got[-1] == pytest.approx(6.4) and np.all(np.diff(np.log(got[1:])) > np.log(1.25))
 
 
 def test_refit_levels_get_coarser_and_smaller_networks(refitted: list[LodLevel]) -> None:
