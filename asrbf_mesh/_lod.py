@@ -427,8 +427,8 @@ def lod_set(scan: Scan | np.ndarray, *, levels: int = 4, method: Method = "resam
         gmean = float(np.sqrt(frame.scale[0] * frame.scale[1]))
         if base_resolution is not None:
             s0 = float(frame.scale[:2].max()) / (base_resolution - 1)
-            spacings = [s0 * 2.0 ** min(i, 200) for i in range(levels)]
-            _check_coarsest(levels, frame.scale[:2], spacings.__getitem__)
+            _check_coarsest(levels, frame.scale[:2], lambda i: s0 * 2.0 ** min(i, 200))
+            spacings = [s0 * 2.0**i for i in range(levels)]
         else:
             s0 = float(spacing) * gmean
             own = sampling_spacing((sc.points @ frame.rotation)[:, :2])

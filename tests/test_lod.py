@@ -445,6 +445,10 @@ def test_too_many_levels_are_refused_up_front(scan) -> None:
     assert round(short / coarsest) + 1 >= MIN_LEVEL_SAMPLES
     with pytest.raises(ConfigError, match="levels must be at most"):
         lod_set(scan, levels=10**9, method="refit")
+    t = time.perf_counter()  # with a base resolution too: before any spacing is listed
+    with pytest.raises(ConfigError, match="levels must be at most"):
+        lod_set(scan, levels=10**9, base_resolution=40)
+    assert time.perf_counter() - t < 30
 
 
 def _terraces(across: bool) -> am.Scan:
